@@ -1,0 +1,412 @@
+"""The paint-layer forward model: BRDF and hemispherical reflectance from air.
+
+The paint is a layer of binder (index ``n``) carrying pigment (relative absorption
+``a``, optical thickness ``tau``, phase-function parameter ``g``), under a smooth
+air/binder surface and on a Lambertian substrate of albedo ``r_s`` seen from the
+binder (paper section 2, eq. 1). The layer is solved by adding–doubling
+(:mod:`bayespig.physics.adding_doubling`); the surface is added by the
+self-consistent equation (8) of appendix A1, and the substrate by the exact
+substrate law, eq. (3).
+
+Angles are in degrees, in air: ``theta_i`` incidence, ``theta_o`` viewing and
+``delta_phi`` the azimuth between the plane of incidence and the plane of viewing,
+``delta_phi = 180`` on the specular side, ``0`` back towards the source.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .adding_doubling import START_THICKNESS, add_lambertian_substrate, layer_mode
+from .fresnel import fresnel_reflectance, normal_transmittance, refracted_cosine
+from .phase import is_rayleigh, n_fourier_modes, phase_fourier_modes
+from .quadrature import DEFAULT_QUADRATURE_POINTS, binder_quadrature
+
+__all__ = [
+    "SurfaceTerms",
+    "surface_terms",
+    "brdf",
+    "hemispherical_reflectance",
+    "specular_transmittance",
+    "optical_thickness_from_transmittance",
+    "validate_layer_arguments",
+]
+
+#: A Fourier mode is negligible once it is this small relative to mode 0, twice in a row.
+MODE_TOLERANCE = 1e-7
+#: Parameter sets solved together (memory: chunk x nodes^2 x 8 bytes per kernel).
+CHUNK = 256
+
+
+def _check_finite(name, value):
+    if np.isnan(value).any():
+        raise ValueError(f"{name} must not be NaN")
+
+
+def validate_layer_arguments(*, a, tau, g, r_s, n):
+    """Check the physical parameters of a paint layer; raise ``ValueError`` naming the bad one.
+
+    Parameters
+    ----------
+    a : array_like
+        Relative absorption in [0, 1] [-].
+    tau : array_like
+        Optical thickness, ``>= 0``, ``inf`` allowed [-].
+    g : array_like
+        Phase-function parameter: HG in (-1, 1), Rayleigh outside [-1, 1].
+    r_s : array_like
+        Substrate albedo seen from the binder, in [0, 1] [-].
+    n : float
+        Refractive index of the binder, ``>= 1`` [-].
+    """
+    a, tau, g, r_s = (np.asarray(v, dtype=float) for v in (a, tau, g, r_s))
+    for name, value in (("a", a), ("tau", tau), ("g", g), ("r_s", r_s)):
+        _check_finite(name, value)
+    if ((a < 0) | (a > 1)).any():
+        raise ValueError("a (relative absorption) must lie in [0, 1]")
+    if (tau < 0).any():
+        raise ValueError("tau (optical thickness) must be >= 0")
+    if ((r_s < 0) | (r_s > 1)).any():
+        raise ValueError("r_s (substrate albedo) must lie in [0, 1]")
+    if np.isinf(g).any() or (np.abs(g) == 1.0).any():
+        raise ValueError("g must be finite and not +-1 (|g| > 1 selects Rayleigh)")
+    if not np.isscalar(n) and np.ndim(n) != 0:
+        raise ValueError("n must be a scalar")
+    if not np.isfinite(n) or n < 1.0:
+        raise ValueError("n (binder refractive index) must be a finite number >= 1")
+
+
+def _validate_angle(name, theta):
+    theta = np.asarray(theta, dtype=float)
+    _check_finite(name, theta)
+    if ((theta < 0) | (theta >= 90)).any():
+        raise ValueError(f"{name} must lie in [0, 90) degrees")
+    return theta
+
+
+@dataclass(frozen=True)
+class SurfaceTerms:
+    """Everything the layer under its surface contributes, for one ``g``.
+
+    For a batch of ``B`` (a, tau) pairs, incidence directions ``k_in`` and viewing
+    directions ``k_out`` (all in air), the quantities of the substrate law (eq. 3):
+    ``f(v, u; r_s) = f0(v, u) + r_s t_down(v) t_up(u) / (1 - r_s r_up)``.
+
+    Attributes
+    ----------
+    f0_modes : numpy.ndarray
+        Fourier modes ``f0_m`` of the BRDF over a black substrate, shape
+        (B, M, k_out, k_in) [1/sr]; ``f0 = sum_m (2 - delta_m0) f0_m (-1)^m cos(m delta_phi)``.
+    t_down : numpy.ndarray
+        Irradiance on the substrate per unit incident irradiance, (B, k_in) [-].
+    t_up : numpy.ndarray
+        Air radiance per unit exitance leaving the substrate, (B, k_out) [1/sr].
+    r_up : numpy.ndarray
+        Fraction of the substrate's exitance that returns to it, (B,) [-].
+    h0 : numpy.ndarray
+        Directional–hemispherical reflectance over a black substrate, specular
+        reflection of the surface excluded, (B, k_in) [-].
+    t_up_hemispherical : numpy.ndarray
+        Exitance into air per unit exitance leaving the substrate, (B,) [-].
+    """
+
+    f0_modes: np.ndarray
+    t_down: np.ndarray
+    t_up: np.ndarray
+    r_up: np.ndarray
+    h0: np.ndarray
+    t_up_hemispherical: np.ndarray
+
+    def brdf(self, delta_phi, r_s):
+        """BRDF [1/sr], shape (B, k_out, k_in), for ``delta_phi`` [deg] broadcastable to it and ``r_s`` (B,)."""
+        m = np.arange(self.f0_modes.shape[1])
+        weights = (2.0 - (m == 0)) * (-1.0) ** m * np.cos(m * np.radians(np.asarray(delta_phi, dtype=float))[..., None])
+        f0 = (np.moveaxis(self.f0_modes, 1, -1) * weights).sum(axis=-1)
+        gain = self.substrate_gain(np.asarray(r_s, dtype=float)[:, None, None])
+        return f0 + gain * self.t_up[:, :, None] * self.t_down[:, None, :]
+
+    def substrate_gain(self, r_s):
+        """``r_s / (1 - r_s r_up)`` of eq. (3), with ``r_s`` broadcast against (B, ...)."""
+        r_up = self.r_up.reshape(self.r_up.shape + (1,) * (np.ndim(r_s) - 1))
+        return r_s / (1.0 - r_s * r_up)
+
+    def hemispherical(self, r_s):
+        """Directional–hemispherical reflectance (specular excluded) [-], shape (B, k_in)."""
+        r = np.asarray(r_s, dtype=float)[:, None]
+        return self.h0 + self.substrate_gain(r) * self.t_down * self.t_up_hemispherical[:, None]
+
+
+def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=DEFAULT_QUADRATURE_POINTS,
+                  n_modes=None, start_thickness=START_THICKNESS, included_substrate=None):
+    """Solve the layer under its surface once for a batch of (a, tau) pairs.
+
+    Parameters
+    ----------
+    theta_in, theta_out : array_like
+        Incidence and viewing angles in air [deg], shapes (k_in,) and (k_out,).
+    a, tau : array_like
+        Relative absorption and optical thickness, shape (B,) [-]; ``tau`` may
+        mix finite values and ``inf``.
+    g : float
+        Phase-function parameter, one value for the batch.
+    n : float
+        Refractive index of the binder [-].
+    n_points : int
+        Gauss points per quadrature interval.
+    n_modes : int, optional
+        Number of azimuthal modes; by default as many as needed until a mode adds
+        less than ``MODE_TOLERANCE`` (one for isotropic scattering).
+    start_thickness : float
+        Thickness of the single-scattering starting layer [-].
+    included_substrate : array_like, optional
+        Substrate albedo, shape (B,), to include *in the solve* (adding the
+        substrate as a layer) instead of through eq. (3): ``f0_modes`` is then the
+        BRDF over that substrate. An independent check of the substrate law.
+
+    Returns
+    -------
+    SurfaceTerms
+    """
+    theta_in = np.atleast_1d(np.asarray(theta_in, dtype=float))
+    theta_out = np.atleast_1d(np.asarray(theta_out, dtype=float))
+    a = np.atleast_1d(np.asarray(a, dtype=float))
+    tau = np.atleast_1d(np.asarray(tau, dtype=float))
+    mu_air = np.cos(np.radians(np.concatenate([theta_in, theta_out])))
+    mu_binder = refracted_cosine(mu_air, 1.0, n)
+    mu, weight = binder_quadrature(n_points, n, mu_binder)
+    c = mu * weight
+    N0 = mu.size - mu_binder.size
+    idx_in = N0 + np.arange(theta_in.size)
+    idx_out = N0 + theta_in.size + np.arange(theta_out.size)
+    t_in = 1.0 - fresnel_reflectance(mu_air[: theta_in.size], 1.0, n)
+    t_out = 1.0 - fresnel_reflectance(mu_air[theta_in.size:], 1.0, n)
+    r_int = fresnel_reflectance(mu, n, 1.0)
+    t_int = 1.0 - r_int
+    max_modes = n_fourier_modes(g) if n_modes is None else n_modes
+    p_refl = phase_fourier_modes(mu, mu, g, max_modes, reflection=True)
+    p_trans = phase_fourier_modes(mu, mu, g, max_modes, reflection=False)
+
+    results = []
+    for opaque in (False, True):
+        select = np.isinf(tau) == opaque
+        for start in range(0, int(select.sum()), CHUNK):
+            rows = np.flatnonzero(select)[start:start + CHUNK]
+            substrate = None if included_substrate is None else np.asarray(included_substrate, float)[rows]
+            results.append((rows, _solve_chunk(
+                mu, weight, c, a[rows], tau[rows], p_refl, p_trans, r_int, t_int, n,
+                idx_in, idx_out, t_in, t_out, n_modes is None and not is_rayleigh(g), start_thickness,
+                substrate,
+            )))
+    B = a.size
+    M = max(chunk["f0_modes"].shape[1] for _, chunk in results)
+    out = {
+        "f0_modes": np.zeros((B, M, theta_out.size, theta_in.size)),
+        "t_down": np.zeros((B, theta_in.size)),
+        "t_up": np.zeros((B, theta_out.size)),
+        "r_up": np.zeros(B),
+        "h0": np.zeros((B, theta_in.size)),
+        "t_up_hemispherical": np.zeros(B),
+    }
+    for rows, chunk in results:
+        for key, value in chunk.items():
+            if key == "f0_modes":
+                out[key][rows, : value.shape[1]] = value
+            else:
+                out[key][rows] = value
+    return SurfaceTerms(**out)
+
+
+def _solve_chunk(mu, weight, c, a, tau, p_refl, p_trans, r_int, t_int, n, idx_in, idx_out,
+                 t_in, t_out, adaptive, start_thickness, included_substrate):
+    """Adding–doubling plus the surface (eq. 8) and substrate-law terms (eq. 3) for one chunk."""
+    N = mu.size
+    eye = np.eye(N)
+    scale = 1.0 / (2.0 * np.pi * n * n)
+    f0_modes = []
+    terms = {}
+    quiet = 0
+    for m in range(p_refl.shape[0]):
+        R, T, direct = layer_mode(mu, weight, a, tau, p_refl[m], p_trans[m], start_thickness)
+        if m == 0 and included_substrate is not None:
+            R = add_lambertian_substrate(R, T, direct, c, included_substrate)
+        # eq. (8): upgoing radiance under the surface, with reflections at its underside
+        surface = eye - R * (c * r_int)
+        X = np.linalg.solve(surface, R[:, :, idx_in])
+        f_m = scale * t_out[None, :, None] * X[:, idx_out, :] * t_in[None, None, :]
+        f0_modes.append(f_m)
+        if m == 0:
+            # eq. (3) terms: irradiance reaching the substrate ...
+            down_diffuse = T[:, :, idx_in] + ((T * c) @ (r_int[None, :, None] * X)) + direct[:, :, None] * (
+                r_int[None, :, None] * X)
+            terms["t_down"] = t_in * (direct[:, idx_in] + np.einsum("j,bjk->bk", c, down_diffuse))
+            # ... radiance from a Lambertian substrate of unit radiance, seen from under the surface
+            up = np.linalg.solve(surface, (direct + (T * c).sum(axis=-1))[:, :, None])[..., 0]
+            terms["t_up"] = t_out * up[:, idx_out] / (n * n * np.pi)
+            back = (R * c).sum(axis=-1) + np.einsum("bij,bj->bi", T * c, r_int * up) + direct * r_int * up
+            terms["r_up"] = 2.0 * back @ c
+            terms["h0"] = t_in * np.einsum("j,bjk->bk", c * t_int, X)
+            terms["t_up_hemispherical"] = 2.0 * (up @ (c * t_int))
+            reference = np.abs(f_m).max(axis=(1, 2))
+        elif adaptive:
+            size = (np.abs(f_m).max(axis=(1, 2)) / np.maximum(reference, 1e-300)).max()
+            quiet = quiet + 1 if size < MODE_TOLERANCE else 0
+            if quiet == 2:
+                break
+    terms["f0_modes"] = np.stack(f0_modes, axis=1)
+    return terms
+
+
+def _as_tuple_broadcast(**arrays):
+    names = list(arrays)
+    values = np.broadcast_arrays(*(np.asarray(arrays[k], dtype=float) for k in names))
+    return dict(zip(names, values))
+
+
+def _evaluate(kind, theta_i, theta_o, delta_phi, *, a, tau, g, r_s, n, n_points):
+    """Shared driver of :func:`brdf` and :func:`hemispherical_reflectance`."""
+    args = _as_tuple_broadcast(theta_i=theta_i, theta_o=theta_o, delta_phi=delta_phi, a=a, tau=tau, g=g, r_s=r_s)
+    shape = args["a"].shape
+    flat = {k: v.ravel() for k, v in args.items()}
+    result = np.empty(flat["a"].size)
+    for g_value in np.unique(flat["g"]):
+        sel = np.flatnonzero(flat["g"] == g_value)
+        pairs, pair_index = np.unique(np.stack([flat["a"][sel], flat["tau"][sel]], axis=1), axis=0,
+                                      return_inverse=True)
+        pair_index = pair_index.ravel()
+        thetas_in, in_index = np.unique(flat["theta_i"][sel], return_inverse=True)
+        thetas_out, out_index = np.unique(flat["theta_o"][sel], return_inverse=True)
+        terms = surface_terms(thetas_in, thetas_out, a=pairs[:, 0], tau=pairs[:, 1], g=float(g_value), n=n,
+                              n_points=n_points)
+        r = flat["r_s"][sel]
+        gain = r / (1.0 - r * terms.r_up[pair_index])
+        if kind == "brdf":
+            modes = terms.f0_modes[pair_index, :, out_index.ravel(), in_index.ravel()]
+            m = np.arange(modes.shape[-1])
+            weights = (2.0 - (m == 0)) * (-1.0) ** m * np.cos(m * np.radians(flat["delta_phi"][sel])[:, None])
+            f0 = (modes * weights).sum(axis=-1)
+            result[sel] = f0 + gain * terms.t_down[pair_index, in_index.ravel()] * terms.t_up[
+                pair_index, out_index.ravel()]
+        else:
+            result[sel] = terms.h0[pair_index, in_index.ravel()] + gain * terms.t_down[
+                pair_index, in_index.ravel()] * terms.t_up_hemispherical[pair_index]
+    return result.reshape(shape)
+
+
+def brdf(theta_i, theta_o, delta_phi, *, a, tau, g=0.0, r_s=0.0, n=1.45, n_points=DEFAULT_QUADRATURE_POINTS):
+    """BRDF of a paint layer seen from air (paper eq. 1), surface specular reflection excluded.
+
+    Parameters
+    ----------
+    theta_i : array_like
+        Incidence angle in air [deg], in [0, 90).
+    theta_o : array_like
+        Viewing angle in air [deg], in [0, 90).
+    delta_phi : array_like
+        Azimuth between the planes of incidence and viewing [deg]; 180 on the
+        specular side, 0 back towards the source.
+    a : array_like
+        Relative absorption ``k_abs / k_ext = 1 - omega`` in [0, 1] [-].
+    tau : array_like
+        Optical thickness ``k_ext H`` [-]; ``numpy.inf`` for an opaque film (eq. 2).
+    g : array_like, optional
+        Henyey–Greenstein parameter in (-1, 1); ``|g| > 1`` selects Rayleigh; 0 isotropic.
+    r_s : array_like, optional
+        Lambertian substrate albedo seen from the binder [-].
+    n : float, optional
+        Refractive index of the (non-absorbing) binder [-].
+    n_points : int, optional
+        Gauss points per quadrature interval (the default is converged to 1e-4).
+
+    Returns
+    -------
+    numpy.ndarray
+        BRDF [1/sr], the arguments broadcast against each other.
+
+    References
+    ----------
+    Ershov, Voloboy & Pozdnyakov (2023), eqs. (1)-(3), (8).
+    """
+    validate_layer_arguments(a=a, tau=tau, g=g, r_s=r_s, n=n)
+    theta_i = _validate_angle("theta_i", theta_i)
+    theta_o = _validate_angle("theta_o", theta_o)
+    _check_finite("delta_phi", np.asarray(delta_phi, dtype=float))
+    if np.isinf(np.asarray(delta_phi, dtype=float)).any():
+        raise ValueError("delta_phi must be finite")
+    return _evaluate("brdf", theta_i, theta_o, delta_phi, a=a, tau=tau, g=g, r_s=r_s, n=n, n_points=n_points)
+
+
+def hemispherical_reflectance(theta_i, *, a, tau, g=0.0, r_s=0.0, n=1.45, specular="excluded",
+                              n_points=DEFAULT_QUADRATURE_POINTS):
+    """Directional–hemispherical reflectance of a paint layer (8°/d; d/8 by reciprocity).
+
+    Parameters
+    ----------
+    theta_i : array_like
+        Incidence angle in air [deg] (8 for the usual sphere geometry).
+    a, tau, g, r_s, n, n_points
+        As in :func:`brdf`.
+    specular : {"excluded", "included"}
+        SCE or SCI: whether the Fresnel reflection of the top surface is counted.
+
+    Returns
+    -------
+    numpy.ndarray
+        Reflectance [-].
+    """
+    if specular not in ("excluded", "included"):
+        raise ValueError(f"specular must be 'excluded' or 'included', got {specular!r}")
+    validate_layer_arguments(a=a, tau=tau, g=g, r_s=r_s, n=n)
+    theta_i = _validate_angle("theta_i", theta_i)
+    diffuse = _evaluate("hemispherical", theta_i, theta_i, 0.0, a=a, tau=tau, g=g, r_s=r_s, n=n,
+                        n_points=n_points)
+    if specular == "included":
+        diffuse = diffuse + fresnel_reflectance(np.cos(np.radians(theta_i)), 1.0, n)
+    return diffuse
+
+
+def specular_transmittance(tau, n=1.45):
+    """Specular (unscattered) transmittance of a film at normal incidence, eq. (5).
+
+    ``T = t_F^2 exp(-tau)`` with ``t_F = 1 - ((n - 1)/(n + 1))^2``.
+
+    Parameters
+    ----------
+    tau : array_like
+        Optical thickness of the film [-].
+    n : float
+        Refractive index of the binder/glass [-].
+
+    Returns
+    -------
+    numpy.ndarray
+        Transmittance [-].
+    """
+    tau = np.asarray(tau, dtype=float)
+    _check_finite("tau", tau)
+    if (tau < 0).any():
+        raise ValueError("tau (optical thickness) must be >= 0")
+    return normal_transmittance(n) ** 2 * np.exp(-tau)
+
+
+def optical_thickness_from_transmittance(transmittance, n=1.45):
+    """Invert eq. (5): ``tau = -log(T / t_F^2)``, eq. (6).
+
+    Parameters
+    ----------
+    transmittance : array_like
+        Specular transmittance in (0, t_F^2] [-].
+    n : float
+        Refractive index [-].
+
+    Returns
+    -------
+    numpy.ndarray
+        Optical thickness [-].
+    """
+    transmittance = np.asarray(transmittance, dtype=float)
+    _check_finite("transmittance", transmittance)
+    if (transmittance <= 0).any():
+        raise ValueError("transmittance must be > 0")
+    return -np.log(transmittance / normal_transmittance(n) ** 2)

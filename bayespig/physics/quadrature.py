@@ -1,0 +1,65 @@
+"""Angular quadrature inside the binder.
+
+The cosine range (0, 1] is split at the critical cosine ``mu_c = sqrt(1 - 1/n^2)``:
+below it light is totally internally reflected at the binder/air surface, above
+it the Fresnel reflectance behaves like ``sqrt(mu - mu_c)``. Each part gets its
+own Gauss–Legendre rule; the upper one in the variable ``s`` with
+``mu = mu_c + (1 - mu_c) s^2``, which removes that square root, so the internal
+reflectance integrals converge spectrally.
+
+Measurement directions are appended as zero-weight nodes (``extra_nodes``): they
+take no part in any angular integral but every kernel is evaluated at them
+exactly (Nystrom interpolation), so a BRDF at an instrument geometry is never
+interpolated from a coarse grid.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .fresnel import critical_cosine
+
+__all__ = ["DEFAULT_QUADRATURE_POINTS", "binder_quadrature"]
+
+#: Default number of Gauss points per interval (two intervals when n > 1).
+DEFAULT_QUADRATURE_POINTS = 16
+
+
+def _gauss(n_points, lo, hi):
+    x, w = np.polynomial.legendre.leggauss(n_points)
+    return lo + (hi - lo) * (x + 1.0) / 2.0, w * (hi - lo) / 2.0
+
+
+def binder_quadrature(n_points=DEFAULT_QUADRATURE_POINTS, n=1.45, extra_nodes=()):
+    """Quadrature nodes and weights for cosines in (0, 1] inside the binder.
+
+    Parameters
+    ----------
+    n_points : int
+        Gauss points per interval [-].
+    n : float
+        Refractive index of the binder [-]; ``n = 1`` gives a single interval.
+    extra_nodes : sequence of float
+        Additional direction cosines evaluated exactly, with zero weight [-].
+
+    Returns
+    -------
+    mu : numpy.ndarray
+        Nodes, the quadrature nodes first, then ``extra_nodes`` [-].
+    weight : numpy.ndarray
+        Weights for ``int_0^1 h(mu) dmu ~ sum weight * h(mu)`` [-].
+    """
+    if n_points < 2:
+        raise ValueError(f"n_points must be at least 2, got {n_points}")
+    mu_c = critical_cosine(n)
+    if mu_c > 0.0:
+        lower_mu, lower_w = _gauss(n_points, 0.0, mu_c)
+        s, s_w = _gauss(n_points, 0.0, 1.0)
+        upper_mu = mu_c + (1.0 - mu_c) * s * s
+        upper_w = s_w * 2.0 * (1.0 - mu_c) * s
+        mu = np.concatenate([lower_mu, upper_mu])
+        weight = np.concatenate([lower_w, upper_w])
+    else:
+        mu, weight = _gauss(n_points, 0.0, 1.0)
+    extra = np.asarray(extra_nodes, dtype=float).ravel()
+    return np.concatenate([mu, extra]), np.concatenate([weight, np.zeros(extra.size)])
