@@ -26,6 +26,9 @@ from .quadrature import DEFAULT_QUADRATURE_POINTS, binder_quadrature
 
 __all__ = [
     "SurfaceTerms",
+    "SurfaceGeometry",
+    "surface_geometry",
+    "surface_mode",
     "surface_terms",
     "brdf",
     "hemispherical_reflectance",
@@ -169,44 +172,30 @@ def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=DEFAUL
     -------
     SurfaceTerms
     """
-    theta_in = np.atleast_1d(np.asarray(theta_in, dtype=float))
-    theta_out = np.atleast_1d(np.asarray(theta_out, dtype=float))
+    geometry = surface_geometry(theta_in, theta_out, n, n_points)
     a = np.atleast_1d(np.asarray(a, dtype=float))
     tau = np.atleast_1d(np.asarray(tau, dtype=float))
-    mu_air = np.cos(np.radians(np.concatenate([theta_in, theta_out])))
-    mu_binder = refracted_cosine(mu_air, 1.0, n)
-    mu, weight = binder_quadrature(n_points, n, mu_binder)
-    c = mu * weight
-    N0 = mu.size - mu_binder.size
-    idx_in = N0 + np.arange(theta_in.size)
-    idx_out = N0 + theta_in.size + np.arange(theta_out.size)
-    t_in = 1.0 - fresnel_reflectance(mu_air[: theta_in.size], 1.0, n)
-    t_out = 1.0 - fresnel_reflectance(mu_air[theta_in.size:], 1.0, n)
-    r_int = fresnel_reflectance(mu, n, 1.0)
-    t_int = 1.0 - r_int
     max_modes = n_fourier_modes(g) if n_modes is None else n_modes
-    p_refl = phase_fourier_modes(mu, mu, g, max_modes, reflection=True)
-    p_trans = phase_fourier_modes(mu, mu, g, max_modes, reflection=False)
-
+    p_refl = phase_fourier_modes(geometry.mu, geometry.mu, g, max_modes, reflection=True)
+    p_trans = phase_fourier_modes(geometry.mu, geometry.mu, g, max_modes, reflection=False)
     results = []
     for opaque in (False, True):
         select = np.isinf(tau) == opaque
         for start in range(0, int(select.sum()), CHUNK):
             rows = np.flatnonzero(select)[start:start + CHUNK]
             substrate = None if included_substrate is None else np.asarray(included_substrate, float)[rows]
-            results.append((rows, _solve_chunk(
-                mu, weight, c, a[rows], tau[rows], p_refl, p_trans, r_int, t_int, n,
-                idx_in, idx_out, t_in, t_out, n_modes is None and not is_rayleigh(g), start_thickness,
-                substrate,
-            )))
+            results.append((rows, _solve_chunk(geometry, a[rows], tau[rows], p_refl, p_trans,
+                                               n_modes is None and not is_rayleigh(g), start_thickness,
+                                               substrate)))
+    k_in, k_out = geometry.idx_in.size, geometry.idx_out.size
     B = a.size
     M = max(chunk["f0_modes"].shape[1] for _, chunk in results)
     out = {
-        "f0_modes": np.zeros((B, M, theta_out.size, theta_in.size)),
-        "t_down": np.zeros((B, theta_in.size)),
-        "t_up": np.zeros((B, theta_out.size)),
+        "f0_modes": np.zeros((B, M, k_out, k_in)),
+        "t_down": np.zeros((B, k_in)),
+        "t_up": np.zeros((B, k_out)),
         "r_up": np.zeros(B),
-        "h0": np.zeros((B, theta_in.size)),
+        "h0": np.zeros((B, k_in)),
         "t_up_hemispherical": np.zeros(B),
     }
     for rows, chunk in results:
@@ -218,43 +207,114 @@ def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=DEFAUL
     return SurfaceTerms(**out)
 
 
-def _solve_chunk(mu, weight, c, a, tau, p_refl, p_trans, r_int, t_int, n, idx_in, idx_out,
-                 t_in, t_out, adaptive, start_thickness, included_substrate):
+@dataclass(frozen=True)
+class SurfaceGeometry:
+    """Quadrature and surface (Fresnel) factors shared by every solve of one direction set."""
+
+    mu: np.ndarray
+    weight: np.ndarray
+    c: np.ndarray
+    r_int: np.ndarray
+    t_int: np.ndarray
+    idx_in: np.ndarray
+    idx_out: np.ndarray
+    t_in: np.ndarray
+    t_out: np.ndarray
+    n: float
+
+
+def surface_geometry(theta_in, theta_out, n=1.45, n_points=DEFAULT_QUADRATURE_POINTS):
+    """Quadrature with the refracted measurement directions as zero-weight nodes.
+
+    Parameters
+    ----------
+    theta_in, theta_out : array_like
+        Incidence and viewing angles in air [deg], shapes (k_in,), (k_out,).
+    n : float
+        Refractive index of the binder [-].
+    n_points : int
+        Gauss points per quadrature interval.
+
+    Returns
+    -------
+    SurfaceGeometry
+    """
+    theta_in = np.atleast_1d(np.asarray(theta_in, dtype=float))
+    theta_out = np.atleast_1d(np.asarray(theta_out, dtype=float))
+    mu_air = np.cos(np.radians(np.concatenate([theta_in, theta_out])))
+    mu, weight = binder_quadrature(n_points, n, refracted_cosine(mu_air, 1.0, n))
+    N0 = mu.size - mu_air.size
+    r_int = fresnel_reflectance(mu, n, 1.0)
+    return SurfaceGeometry(
+        mu=mu, weight=weight, c=mu * weight, r_int=r_int, t_int=1.0 - r_int,
+        idx_in=N0 + np.arange(theta_in.size), idx_out=N0 + theta_in.size + np.arange(theta_out.size),
+        t_in=1.0 - fresnel_reflectance(mu_air[: theta_in.size], 1.0, n),
+        t_out=1.0 - fresnel_reflectance(mu_air[theta_in.size:], 1.0, n), n=float(n),
+    )
+
+
+def surface_mode(geometry, R, T, direct, first_mode):
+    """Add the air/binder surface (eq. 8) to one azimuthal mode of a layer.
+
+    Parameters
+    ----------
+    geometry : SurfaceGeometry
+    R, T : numpy.ndarray
+        Layer kernels of this mode, shape (B, N, N) [-].
+    direct : numpy.ndarray
+        Unscattered transmission of the layer, shape (B, N) [-].
+    first_mode : bool
+        True for mode 0, which also yields the substrate-law terms (eq. 3).
+
+    Returns
+    -------
+    dict
+        ``f_mode`` (B, k_out, k_in) [1/sr] and, for mode 0, ``t_down``, ``t_up``,
+        ``r_up``, ``h0``, ``t_up_hemispherical`` as in :class:`SurfaceTerms`.
+    """
+    gm = geometry
+    c, r_int, n = gm.c, gm.r_int, gm.n
+    # eq. (8): upgoing radiance under the surface, with reflections at its underside
+    surface = np.eye(c.size) - R * (c * r_int)
+    X = np.linalg.solve(surface, R[:, :, gm.idx_in])
+    out = {"f_mode": gm.t_out[None, :, None] * X[:, gm.idx_out, :] * gm.t_in[None, None, :] / (2.0 * np.pi * n * n)}
+    if not first_mode:
+        return out
+    # eq. (3) terms: irradiance reaching the substrate ...
+    reflected_down = r_int[None, :, None] * X
+    down_diffuse = T[:, :, gm.idx_in] + (T * c) @ reflected_down + direct[:, :, None] * reflected_down
+    out["t_down"] = gm.t_in * (direct[:, gm.idx_in] + np.einsum("j,bjk->bk", c, down_diffuse))
+    # ... radiance from a Lambertian substrate of unit radiance, under the surface ...
+    up = np.linalg.solve(surface, (direct + (T * c).sum(axis=-1))[:, :, None])[..., 0]
+    out["t_up"] = gm.t_out * up[:, gm.idx_out] / (n * n * np.pi)
+    # ... and what of it the layer and the surface send back to the substrate
+    back = (R * c).sum(axis=-1) + np.einsum("bij,bj->bi", T * c, r_int * up) + direct * r_int * up
+    out["r_up"] = 2.0 * back @ c
+    out["h0"] = gm.t_in * np.einsum("j,bjk->bk", c * gm.t_int, X)
+    out["t_up_hemispherical"] = 2.0 * (up @ (c * gm.t_int))
+    return out
+
+
+def _solve_chunk(geometry, a, tau, p_refl, p_trans, adaptive, start_thickness, included_substrate):
     """Adding–doubling plus the surface (eq. 8) and substrate-law terms (eq. 3) for one chunk."""
-    N = mu.size
-    eye = np.eye(N)
-    scale = 1.0 / (2.0 * np.pi * n * n)
-    f0_modes = []
+    f_modes = []
     terms = {}
     quiet = 0
     for m in range(p_refl.shape[0]):
-        R, T, direct = layer_mode(mu, weight, a, tau, p_refl[m], p_trans[m], start_thickness)
+        R, T, direct = layer_mode(geometry.mu, geometry.weight, a, tau, p_refl[m], p_trans[m], start_thickness)
         if m == 0 and included_substrate is not None:
-            R = add_lambertian_substrate(R, T, direct, c, included_substrate)
-        # eq. (8): upgoing radiance under the surface, with reflections at its underside
-        surface = eye - R * (c * r_int)
-        X = np.linalg.solve(surface, R[:, :, idx_in])
-        f_m = scale * t_out[None, :, None] * X[:, idx_out, :] * t_in[None, None, :]
-        f0_modes.append(f_m)
+            R = add_lambertian_substrate(R, T, direct, geometry.c, included_substrate)
+        mode = surface_mode(geometry, R, T, direct, m == 0)
+        f_modes.append(mode.pop("f_mode"))
         if m == 0:
-            # eq. (3) terms: irradiance reaching the substrate ...
-            down_diffuse = T[:, :, idx_in] + ((T * c) @ (r_int[None, :, None] * X)) + direct[:, :, None] * (
-                r_int[None, :, None] * X)
-            terms["t_down"] = t_in * (direct[:, idx_in] + np.einsum("j,bjk->bk", c, down_diffuse))
-            # ... radiance from a Lambertian substrate of unit radiance, seen from under the surface
-            up = np.linalg.solve(surface, (direct + (T * c).sum(axis=-1))[:, :, None])[..., 0]
-            terms["t_up"] = t_out * up[:, idx_out] / (n * n * np.pi)
-            back = (R * c).sum(axis=-1) + np.einsum("bij,bj->bi", T * c, r_int * up) + direct * r_int * up
-            terms["r_up"] = 2.0 * back @ c
-            terms["h0"] = t_in * np.einsum("j,bjk->bk", c * t_int, X)
-            terms["t_up_hemispherical"] = 2.0 * (up @ (c * t_int))
-            reference = np.abs(f_m).max(axis=(1, 2))
+            terms.update(mode)
+            reference = np.abs(f_modes[0]).max(axis=(1, 2))
         elif adaptive:
-            size = (np.abs(f_m).max(axis=(1, 2)) / np.maximum(reference, 1e-300)).max()
+            size = (np.abs(f_modes[-1]).max(axis=(1, 2)) / np.maximum(reference, 1e-300)).max()
             quiet = quiet + 1 if size < MODE_TOLERANCE else 0
             if quiet == 2:
                 break
-    terms["f0_modes"] = np.stack(f0_modes, axis=1)
+    terms["f0_modes"] = np.stack(f_modes, axis=1)
     return terms
 
 
