@@ -9,9 +9,15 @@ from .physics.forward import (
 
 __version__ = "0.1.0"
 
+from .instruments import get_instrument, predict  # noqa: E402  (table needs __version__)
+from .table import load_table  # noqa: E402
+
 __all__ = [
     "brdf",
     "hemispherical_reflectance",
     "specular_transmittance",
     "optical_thickness_from_transmittance",
+    "get_instrument",
+    "predict",
+    "load_table",
 ]

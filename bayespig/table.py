@@ -38,7 +38,7 @@ from .instruments import Instrument, channel_directions, get_instrument
 from .physics.adding_doubling import START_THICKNESS, double, layer_mode, start_layer
 from .physics.forward import surface_geometry, surface_mode, validate_layer_arguments
 from .physics.fresnel import fresnel_reflectance
-from .physics.phase import phase_fourier_modes
+from .physics.phase import normalise_on_quadrature, phase_fourier_modes
 from .physics.quadrature import DEFAULT_QUADRATURE_POINTS
 
 __all__ = ["TableSettings", "LookupTable", "build_table", "load_table", "cache_directory"]
@@ -169,6 +169,7 @@ def _build_g_slice(instrument, settings, g):
     max_modes = 1 if g == 0.0 else int(np.ceil(np.log(MODE_TOLERANCE) / np.log(abs(g)))) + 1
     p_refl = phase_fourier_modes(mu, mu, g, max_modes, reflection=True)
     p_trans = phase_fourier_modes(mu, mu, g, max_modes, reflection=False)
+    p_refl, p_trans = normalise_on_quadrature(p_refl, p_trans, weight)
     kinds = [ch.kind for ch in instrument.channels]
     black = np.zeros((n_a, n_tau + 2, K))
     quiet = 0

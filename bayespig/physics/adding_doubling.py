@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from .fresnel import fresnel_reflectance
-from .phase import n_fourier_modes, phase_fourier_modes
+from .phase import n_fourier_modes, normalise_on_quadrature, phase_fourier_modes
 from .quadrature import DEFAULT_QUADRATURE_POINTS, binder_quadrature
 
 __all__ = [
@@ -213,6 +213,7 @@ def layer_kernels(mu, weight, a, tau, g, n_modes=None, start_thickness=START_THI
     n_modes = n_fourier_modes(g) if n_modes is None else n_modes
     p_reflection = phase_fourier_modes(mu, mu, g, n_modes, reflection=True)
     p_transmission = phase_fourier_modes(mu, mu, g, n_modes, reflection=False)
+    p_reflection, p_transmission = normalise_on_quadrature(p_reflection, p_transmission, weight)
     modes = [
         layer_mode(mu, weight, a, tau, p_reflection[m], p_transmission[m], start_thickness)
         for m in range(n_modes)
@@ -279,7 +280,7 @@ def bare_layer_functions(mu_out, mu_in, *, a, tau, g=0.0, n_points=DEFAULT_QUADR
     """
     mu_out = np.atleast_1d(np.asarray(mu_out, dtype=float))
     mu_in = np.atleast_1d(np.asarray(mu_in, dtype=float))
-    mu, weight = binder_quadrature(2 * n_points, 1.0, np.concatenate([mu_out, mu_in]))
+    mu, weight = binder_quadrature(n_points, 1.0, np.concatenate([mu_out, mu_in]))
     R, T, _ = layer_kernels(mu, weight, np.array([a]), np.array([tau]), g, n_modes=1)
     n0 = mu.size - mu_out.size - mu_in.size
     rows = n0 + np.arange(mu_out.size)

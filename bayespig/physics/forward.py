@@ -15,13 +15,15 @@ Angles are in degrees, in air: ``theta_i`` incidence, ``theta_o`` viewing and
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
 from .adding_doubling import START_THICKNESS, add_lambertian_substrate, layer_mode
 from .fresnel import fresnel_reflectance, normal_transmittance, refracted_cosine
-from .phase import is_rayleigh, n_fourier_modes, phase_fourier_modes
+from .phase import is_rayleigh, n_fourier_modes, normalise_on_quadrature, phase_fourier_modes
 from .quadrature import DEFAULT_QUADRATURE_POINTS, binder_quadrature
 
 __all__ = [
@@ -41,6 +43,8 @@ __all__ = [
 MODE_TOLERANCE = 1e-7
 #: Parameter sets solved together (memory: chunk x nodes^2 x 8 bytes per kernel).
 CHUNK = 256
+#: Threads solving chunks concurrently.
+THREADS = min(2, os.cpu_count() or 1)
 
 
 def _check_finite(name, value):
@@ -178,15 +182,23 @@ def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=DEFAUL
     max_modes = n_fourier_modes(g) if n_modes is None else n_modes
     p_refl = phase_fourier_modes(geometry.mu, geometry.mu, g, max_modes, reflection=True)
     p_trans = phase_fourier_modes(geometry.mu, geometry.mu, g, max_modes, reflection=False)
-    results = []
+    p_refl, p_trans = normalise_on_quadrature(p_refl, p_trans, geometry.weight)
+    jobs = []
     for opaque in (False, True):
-        select = np.isinf(tau) == opaque
-        for start in range(0, int(select.sum()), CHUNK):
-            rows = np.flatnonzero(select)[start:start + CHUNK]
-            substrate = None if included_substrate is None else np.asarray(included_substrate, float)[rows]
-            results.append((rows, _solve_chunk(geometry, a[rows], tau[rows], p_refl, p_trans,
-                                               n_modes is None and not is_rayleigh(g), start_thickness,
-                                               substrate)))
+        select = np.flatnonzero(np.isinf(tau) == opaque)
+        jobs.extend(select[start:start + CHUNK] for start in range(0, select.size, CHUNK))
+    adaptive = n_modes is None and not is_rayleigh(g)
+
+    def solve(rows):
+        substrate = None if included_substrate is None else np.asarray(included_substrate, float)[rows]
+        return rows, _solve_chunk(geometry, a[rows], tau[rows], p_refl, p_trans, adaptive, start_thickness,
+                                  substrate)
+
+    if len(jobs) > 1:  # numpy's batched linear algebra releases the GIL: use both cores
+        with ThreadPoolExecutor(max_workers=THREADS) as pool:
+            results = list(pool.map(solve, jobs))
+    else:
+        results = [solve(rows) for rows in jobs]
     k_in, k_out = geometry.idx_in.size, geometry.idx_out.size
     B = a.size
     M = max(chunk["f0_modes"].shape[1] for _, chunk in results)

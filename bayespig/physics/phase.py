@@ -23,6 +23,7 @@ __all__ = [
     "is_isotropic",
     "n_fourier_modes",
     "phase_fourier_modes",
+    "normalise_on_quadrature",
 ]
 
 #: Relative size below which a Fourier mode of the phase function is dropped.
@@ -128,3 +129,37 @@ def phase_fourier_modes(mu_out, mu_in, g, n_modes, *, reflection):
     if modes.shape[0] < n_modes:
         modes = np.concatenate([modes, np.zeros((n_modes - modes.shape[0],) + modes.shape[1:])])
     return modes
+
+
+def normalise_on_quadrature(p_reflection, p_transmission, weight, n_iterations=20):
+    """Rescale phase-function modes so the discrete mode 0 integrates to exactly 2.
+
+    A sharply peaked Henyey–Greenstein law is not integrated exactly by a modest
+    quadrature; the defect acts as a spurious absorption or gain. With factors
+    ``s_i`` the kernels become ``s_i s_j p_ij`` (symmetric, so reciprocity holds)
+    and ``sum_i w_i s_i s_j (p_R + p_T)_ij = 2`` for every direction ``j``
+    (Wiscombe 1976, "On initialization, error and flux conservation in the
+    doubling method"). Zero-weight nodes get ``s_j`` from their own column.
+
+    Parameters
+    ----------
+    p_reflection, p_transmission : numpy.ndarray
+        Modes, shape (M, N, N) [-].
+    weight : numpy.ndarray
+        Quadrature weights, shape (N,), zero for extra nodes [-].
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        The rescaled ``p_reflection``, ``p_transmission``.
+    """
+    total = p_reflection[0] + p_transmission[0]
+    real = weight > 0
+    s = np.ones(weight.size)
+    for _ in range(n_iterations):
+        column = (weight * s) @ total
+        s[real] = s[real] * np.sqrt(2.0 / (s[real] * column[real]))
+    column = (weight * s) @ total
+    s[~real] = 2.0 / column[~real]
+    scale = s[:, None] * s[None, :]
+    return p_reflection * scale, p_transmission * scale

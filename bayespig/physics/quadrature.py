@@ -38,7 +38,8 @@ def binder_quadrature(n_points=DEFAULT_QUADRATURE_POINTS, n=1.45, extra_nodes=()
     n_points : int
         Gauss points per interval [-].
     n : float
-        Refractive index of the binder [-]; ``n = 1`` gives a single interval.
+        Refractive index of the binder [-]; ``n = 1`` gives a single interval
+        of ``2 n_points`` points (the same cost).
     extra_nodes : sequence of float
         Additional direction cosines evaluated exactly, with zero weight [-].
 
@@ -60,6 +61,6 @@ def binder_quadrature(n_points=DEFAULT_QUADRATURE_POINTS, n=1.45, extra_nodes=()
         mu = np.concatenate([lower_mu, upper_mu])
         weight = np.concatenate([lower_w, upper_w])
     else:
-        mu, weight = _gauss(n_points, 0.0, 1.0)
+        mu, weight = _gauss(2 * n_points, 0.0, 1.0)
     extra = np.asarray(extra_nodes, dtype=float).ravel()
     return np.concatenate([mu, extra]), np.concatenate([weight, np.zeros(extra.size)])
