@@ -76,7 +76,7 @@ def test_reflectance_infinity_matches_printed_formula_and_round_trips(rng):
     ],
 )
 def test_layer_matches_two_flux_equations(K, S, thickness, background):
-    R_ref, T_ref = two_flux_reference(K, S, thickness, background)
+    R_ref, _ = two_flux_reference(K, S, thickness, background)
     assert km.layer_reflectance(K, S, thickness, background) == pytest.approx(R_ref, abs=ODE_TOL)
     assert km.layer_reflectance(K, S, thickness, background) == pytest.approx(
         kubelka_coth_formula(K, S, thickness, background), abs=EXACT_TOL
@@ -204,7 +204,9 @@ def test_saunderson_constants_from_refractive_index():
     r_e = 2.0 * integrate.quad(lambda mu: fresnel_unpolarised(mu, 1.0, n) * mu, 0.0, 1.0)[0]
     assert r_e == pytest.approx(0.092, abs=JUDD_TOL)
     for index in (1.33, 1.45, 1.5, 1.7):
-        r_e = 2.0 * integrate.quad(lambda mu: fresnel_unpolarised(mu, 1.0, index) * mu, 0, 1)[0]
+        r_e = (
+            2.0 * integrate.quad(lambda mu, n=index: fresnel_unpolarised(mu, 1.0, n) * mu, 0, 1)[0]
+        )
         assert 1.0 - km.saunderson_k2(index) == pytest.approx((1.0 - r_e) / index**2, abs=1e-8)
     assert km.saunderson_k2(1.0) == pytest.approx(0.0, abs=EXACT_TOL)
 
@@ -265,14 +267,16 @@ def test_black_white_opaque_and_noisy_films():
     KX, SX = km.ks_from_black_white(
         [R_inf, R_inf + 1e-4], [R_inf, R_inf], 0.01, 0.85, clip_to_physical=True
     )
-    assert np.all(np.isinf(KX)) and np.all(np.isinf(SX))
+    assert np.all(np.isinf(KX))
+    assert np.all(np.isinf(SX))
     # A white film over black and white, pushed to slightly negative K by noise.
     R_b = km.layer_reflectance(0.0, 2.0, 1.0, 0.01)
     R_w = km.layer_reflectance(0.0, 2.0, 1.0, 0.85) + 2e-3
     with pytest.raises(ValueError, match="negative absorption"):
         km.ks_from_black_white(R_b, R_w, 0.01, 0.85)
     KX, SX = km.ks_from_black_white(R_b, R_w, 0.01, 0.85, clip_to_physical=True)
-    assert KX == 0.0 and 0.0 < SX < np.inf
+    assert KX == 0.0
+    assert 0.0 < SX < np.inf
 
 
 # ------------------------------------------------------------------ bad input

@@ -20,8 +20,8 @@ from scipy import integrate
 
 # Composite Gauss-Legendre grid on [0, 1], graded geometrically towards mu = 0 where
 # H(mu) behaves like 1 + c mu log(mu).
-_GRID_BREAKS = np.concatenate(([0.0], np.logspace(-8, 0, 17)))
-_GRID_POINTS_PER_PANEL = 24
+_GRID_BREAKS = np.concatenate(([0.0], np.logspace(-8, 0, 9)))
+_GRID_POINTS_PER_PANEL = 20
 _NEWTON_TOL = 1e-14
 _NEWTON_MAX_STEPS = 50
 
