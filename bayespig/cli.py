@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
+import time
+import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -30,6 +34,90 @@ def _demo(args):
     return 0
 
 
+def _instrument_argument(name):
+    """A built-in instrument name, or comma-separated geometry labels such as ``45as15,45as110``."""
+    from .instruments import BUILT_IN_INSTRUMENTS
+
+    if name in BUILT_IN_INSTRUMENTS:
+        return name
+    try:
+        from .instruments import get_instrument
+
+        return get_instrument([label for label in name.split(",") if label.strip()])
+    except ValueError:
+        raise ValueError(
+            f"unknown instrument {name!r}; built-in instruments: {', '.join(BUILT_IN_INSTRUMENTS)} "
+            "(or comma-separated geometry labels such as 45as15,45as110)"
+        ) from None
+
+
+def _table_build(args):
+    from .table import load_table, table_path
+
+    instrument = _instrument_argument(args.instrument)
+    start = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        table = load_table(instrument, g=args.g, n=args.n, rebuild=args.rebuild, progress=True)
+    for warning in caught:
+        print(f"bayespig: warning: {warning.message}", file=sys.stderr)
+    path = table_path(table.key)
+    print(f"{table!r}")
+    print(f"  file {path} ({path.stat().st_size / 1e6:.2f} MB), ready in {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+def _describe_cache_file(path):
+    """Key, instrument and settings stored in a cached table (only its small metadata is read)."""
+    try:
+        with open(path, "rb") as handle, np.load(handle, allow_pickle=False) as data:
+            key = str(data["__key__"]) if "__key__" in data.files else "?"
+            text = str(data["__description__"]) if "__description__" in data.files else None
+            name = str(data["__instrument__"]) if "__instrument__" in data.files else "?"
+    except Exception as error:  # any unreadable file is reported, never trusted
+        return {"status": f"unreadable ({type(error).__name__}); it will be rebuilt on next use"}
+    if text is None:
+        return {"key": key, "status": "no description (written by an older bayespig)"}
+    description = json.loads(text)
+    status = "ok" if path.name == f"table-{key}.npz" else "key does not match the file name"
+    return {"key": key, "status": status, "name": name, **description}
+
+
+def _format_settings(settings):
+    g = "isotropic" if settings["g_range"] is None else f"g in {settings['g_range']} ({settings['n_g']} nodes)"
+    return (f"{g}; a: {settings['n_a']} nodes (stretch {settings['a_stretch']:g}); "
+            f"tau: 2^{settings['log2_tau_min']}..2^{settings['log2_tau_max']}, {settings['per_octave']}/octave, "
+            f"+ opaque; quadrature {settings['n_points']} points/interval, "
+            f"start thickness {settings['start_thickness']:.3g}")
+
+
+def _table_info(args):
+    from .table import cache_directory
+
+    directory = cache_directory()
+    print(f"cache directory: {directory} (set BAYESPIG_CACHE to move it)")
+    files = sorted(directory.glob("table-*.npz")) if directory.is_dir() else []
+    shown = 0
+    for path in files:
+        info = _describe_cache_file(path)
+        name = info.get("name")
+        if args.instrument and name != args.instrument:
+            continue
+        shown += 1
+        size = f"{path.stat().st_size / 1e6:.2f} MB"
+        if "instrument" not in info:
+            print(f"{path.name}  {size}  {info['status']}")
+            continue
+        instrument = info["instrument"]
+        labels = ", ".join(ch["label"] for ch in instrument["channels"])
+        print(f"{info['key']}  {size}  {name}  n = {instrument['n']:g}  "
+              f"[channels: {labels}]  bayespig {info['version']}")
+        print(f"    {_format_settings(info['settings'])}" + ("" if info["status"] == "ok" else f"  ({info['status']})"))
+    what = f" for instrument {args.instrument!r}" if args.instrument else ""
+    print(f"{shown} cached table{'s' if shown != 1 else ''}{what}")
+    return 0
+
+
 def build_parser():
     """The argument parser of the ``bayespig`` command."""
     parser = argparse.ArgumentParser(prog="bayespig", description=__doc__)
@@ -37,6 +125,21 @@ def build_parser():
     demo = sub.add_parser("demo", help="run the main job on the bundled example")
     demo.add_argument("--instrument", default="multi-angle-45")
     demo.set_defaults(func=_demo)
+
+    table = sub.add_parser("table", help="build and inspect the cached look-up tables")
+    table_sub = table.add_subparsers(dest="table_command", required=True)
+    build = table_sub.add_parser("build", help="build (or load) the cached table of an instrument")
+    build.add_argument("--instrument", required=True,
+                       help="built-in name (multi-angle-45, multi-angle-45-15, 8d-sci, 8d-sce, 45-0) "
+                            "or comma-separated geometry labels such as 45as15,45as110")
+    build.add_argument("--g", choices=("isotropic", "free"), default="isotropic",
+                       help="isotropic scattering only (default) or a g axis")
+    build.add_argument("--n", type=float, default=1.45, help="binder refractive index (default 1.45)")
+    build.add_argument("--rebuild", action="store_true", help="ignore any cached file")
+    build.set_defaults(func=_table_build)
+    info = table_sub.add_parser("info", help="list the cached tables")
+    info.add_argument("--instrument", help="only tables of this instrument (name as listed)")
+    info.set_defaults(func=_table_info)
     return parser
 
 
@@ -46,7 +149,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except ValueError as error:
+    except (ValueError, OSError) as error:
         print(f"bayespig: error: {error}", file=sys.stderr)
         return 2
 

@@ -137,16 +137,25 @@ def _instrument_description(instrument):
     return {"n": instrument.n, "channels": [dataclasses.asdict(ch) for ch in instrument.channels]}
 
 
-def table_key(instrument, settings):
-    """Hash of every setting that changes a table's numbers."""
+def table_description(instrument, settings):
+    """JSON text of every setting that changes a table's numbers (hashed by :func:`table_key`)."""
     description = {
         "format": FORMAT_VERSION,
         "version": __version__,
         "instrument": _instrument_description(instrument),
         "settings": dataclasses.asdict(settings),
     }
-    text = json.dumps(description, sort_keys=True, default=float)
-    return hashlib.sha256(text.encode()).hexdigest()[:32]
+    return json.dumps(description, sort_keys=True, default=float)
+
+
+def table_key(instrument, settings):
+    """Hash of every setting that changes a table's numbers."""
+    return hashlib.sha256(table_description(instrument, settings).encode()).hexdigest()[:32]
+
+
+def table_path(key, cache_dir=None):
+    """Cache file of the table with this key, in ``cache_dir`` or :func:`cache_directory`."""
+    return Path(cache_dir or cache_directory()) / f"table-{key}.npz"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -230,6 +239,11 @@ def _build_g_slice(instrument, settings, g):
     }
 
 
+def _check_index(n):
+    if not np.isscalar(n) or not np.isfinite(n) or n < 1.0:
+        raise ValueError(f"n (binder refractive index) must be a finite number >= 1, got {n!r}")
+
+
 def build_table(instrument, settings=None, *, executor=None, progress=True):
     """Tabulate an instrument's channels (not cached; see :func:`load_table`).
 
@@ -250,6 +264,7 @@ def build_table(instrument, settings=None, *, executor=None, progress=True):
     LookupTable
     """
     instrument = get_instrument(instrument)
+    _check_index(instrument.n)
     settings = settings or TableSettings()
     g_nodes = settings.g_nodes
     own_executor = executor is None and g_nodes.size > 1
@@ -504,11 +519,13 @@ def _checksum(arrays):
 
 
 def save_table(table, path):
-    """Write a table atomically as ``.npz`` (no pickle) with its key and checksum."""
+    """Write a table atomically as ``.npz`` (no pickle) with its key, description and checksum."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     payload = dict(table.arrays)
     payload["__key__"] = np.array(table.key)
+    payload["__description__"] = np.array(table_description(table.instrument, table.settings))
+    payload["__instrument__"] = np.array(table.instrument.name)
     payload["__checksum__"] = np.array(_checksum(table.arrays))
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
     try:
@@ -529,12 +546,15 @@ def read_table(path, instrument, settings):
     instrument = get_instrument(instrument)
     key = table_key(instrument, settings)
     try:
-        with np.load(path, allow_pickle=False) as data:
+        # our own handle: np.load leaks the one it opens when the zip directory is damaged
+        with open(path, "rb") as handle, np.load(handle, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
     except Exception as error:  # zip/npy errors of many kinds mean one thing here
         raise CacheError(f"cached table {path} is unreadable ({type(error).__name__}: {error})") from None
     stored_key = str(arrays.pop("__key__", ""))
     stored_sum = str(arrays.pop("__checksum__", ""))
+    arrays.pop("__description__", None)
+    arrays.pop("__instrument__", None)
     if stored_key != key:
         raise CacheError(f"cached table {path} was built with other settings (key {stored_key} != {key})")
     if stored_sum != _checksum(arrays):
@@ -573,6 +593,7 @@ def load_table(instrument, *, g="isotropic", n=1.45, settings=None, cache_dir=No
     """
     if g not in ("isotropic", "free"):
         raise ValueError(f"g must be 'isotropic' or 'free', got {g!r}")
+    _check_index(n)
     if isinstance(instrument, Instrument):
         if instrument.n != n:
             instrument = dataclasses.replace(instrument, n=n)
@@ -583,7 +604,7 @@ def load_table(instrument, *, g="isotropic", n=1.45, settings=None, cache_dir=No
     elif g == "free" and settings.g_range is None:
         raise ValueError("g='free' needs settings with a g_range")
     key = table_key(instrument, settings)
-    path = Path(cache_dir or cache_directory()) / f"table-{key}.npz"
+    path = table_path(key, cache_dir)
     if path.exists() and not rebuild:
         try:
             return read_table(path, instrument, settings)

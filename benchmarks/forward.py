@@ -2,8 +2,8 @@
 
 Run from the repository root::
 
-    /tmp/venv/bin/python benchmarks/forward.py          # ~2-3 minutes
-    /tmp/venv/bin/python benchmarks/forward.py --full   # every grid point, also for g = 0.5
+    python benchmarks/forward.py          # ~2-3 minutes
+    python benchmarks/forward.py --full   # every grid point, also for g = 0.5
 
 bayespig computes the BRDF at the six multi-angle geometries (45as-15 ... 45as110, ASTM E2194)
 for a 64 x 64 grid of (a, tau) in one batched call. iadpython 0.5.3 can only give totals at

@@ -2,7 +2,7 @@
 
 Run from the repository root::
 
-    /tmp/venv/bin/python benchmarks/quadrature_convergence.py
+    python benchmarks/quadrature_convergence.py
 
 Prints the relative change of the BRDF at the six multi-angle geometries (45as-15 ... 45as110)
 and of the 8°/d hemispherical reflectance against the number of Gauss points per quadrature
@@ -27,7 +27,7 @@ from bayespig.physics import adding_doubling, fresnel, substrate
 from bayespig.physics.quadrature import DEFAULT_QUADRATURE_POINTS
 from tests.physics import reference as ref
 
-COMMAND = "/tmp/venv/bin/python benchmarks/quadrature_convergence.py"
+COMMAND = "python benchmarks/quadrature_convergence.py"
 REPORT = ROOT / "reports" / "validation.md"
 
 ASPECULAR = np.array([-15.0, 15.0, 25.0, 45.0, 75.0, 110.0])
