@@ -11,6 +11,7 @@ __version__ = "0.1.0"
 
 from .instruments import get_instrument, predict  # noqa: E402  (table needs __version__)
 from .table import load_table  # noqa: E402
+from .data import MeasurementError, MeasurementSet, read_measurements, simulate  # noqa: E402
 
 __all__ = [
     "brdf",
@@ -20,4 +21,8 @@ __all__ = [
     "get_instrument",
     "predict",
     "load_table",
+    "read_measurements",
+    "simulate",
+    "MeasurementSet",
+    "MeasurementError",
 ]

@@ -118,6 +118,24 @@ def _table_info(args):
     return 0
 
 
+def _check(args):
+    from .data import check_report
+
+    print(check_report(args.file))
+    return 0
+
+
+def _simulate(args):
+    from .data import simulate_to_csv
+
+    instrument = _instrument_argument(args.instrument)
+    measurements = simulate_to_csv(args.out, a=args.a, tau=args.tau, g=args.g, design=args.design,
+                                   instrument=instrument, eps=args.eps, seed=args.seed)
+    print(f"wrote {args.out}: {len(measurements.samples)} samples, "
+          f"{measurements.n_wavelengths} wavelengths, design {args.design}, eps {args.eps}, seed {args.seed}")
+    return 0
+
+
 def build_parser():
     """The argument parser of the ``bayespig`` command."""
     parser = argparse.ArgumentParser(prog="bayespig", description=__doc__)
@@ -140,6 +158,21 @@ def build_parser():
     info = table_sub.add_parser("info", help="list the cached tables")
     info.add_argument("--instrument", help="only tables of this instrument (name as listed)")
     info.set_defaults(func=_table_info)
+
+    check = sub.add_parser("check", help="say what a measurement file holds, or every problem in it")
+    check.add_argument("file", help="bayespig CSV, ASTM E1392 file or wide spectral table")
+    check.set_defaults(func=_check)
+
+    simulate = sub.add_parser("simulate", help="simulate a measurement set (paper eq. 7 noise) as CSV")
+    simulate.add_argument("--a", type=float, required=True, help="relative absorption a = 1 - omega")
+    simulate.add_argument("--tau", type=float, required=True, help="optical thickness of the film group")
+    simulate.add_argument("--g", type=float, default=0.0, help="phase-function parameter (default 0)")
+    simulate.add_argument("--design", default="method4", choices=("method1", "method2", "method3", "method4"))
+    simulate.add_argument("--instrument", default="multi-angle-45")
+    simulate.add_argument("--eps", type=float, default=0.05, help="relative measurement error (default 0.05)")
+    simulate.add_argument("--seed", type=int, default=0)
+    simulate.add_argument("--out", required=True, help="CSV file to write")
+    simulate.set_defaults(func=_simulate)
     return parser
 
 

@@ -15,7 +15,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["Problem", "MeasurementError", "atomic_write_text"]
+__all__ = ["MeasurementError", "Problem", "atomic_write_text"]
 
 
 @dataclass(frozen=True)
@@ -89,7 +89,7 @@ class MeasurementError(ValueError):
 
 
 def atomic_write_text(path, text):
-    """Write ``text`` to ``path`` atomically: a temporary file in the same directory, then ``os.replace``.
+    """Write ``text`` to ``path`` atomically: a temporary file beside it, then ``os.replace``.
 
     Nothing is left at ``path`` (or changed there) if writing fails.
 
@@ -99,11 +99,19 @@ def atomic_write_text(path, text):
     text : str
     """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=f".{path.name}.", suffix=".tmp")
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as handle:
             handle.write(text)
+        os.chmod(tmp, path.stat().st_mode & 0o777 if path.exists() else 0o666 & ~_umask())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _umask():
+    """The process umask (read by setting and restoring it)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask

@@ -1,0 +1,128 @@
+"""One entry for every file format, and the report of ``bayespig check``."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from .astm_e1392 import looks_like_astm_e1392, read_astm_e1392
+from .csv_format import read_csv
+from .errors import MeasurementError, Problem
+from .model import MeasurementSet
+from .spectral_table import looks_like_spectral_table, read_revigo
+
+__all__ = ["check_report", "file_format", "read_all", "read_measurements"]
+
+
+def file_format(path):
+    """``"csv"``, ``"astm_e1392"`` or ``"spectral_table"``, from the suffix and the content."""
+    path = Path(path)
+    if path.is_dir() or looks_like_spectral_table(path):
+        return "spectral_table"
+    if looks_like_astm_e1392(path):
+        return "astm_e1392"
+    return "csv"
+
+
+def read_all(path, *, resample=False):
+    """Every measurement set in a file: film id -> set (CSV and E1392: one, keyed by file name)."""
+    kind = file_format(path)
+    if kind == "spectral_table":
+        return read_revigo(path)
+    reader = read_astm_e1392 if kind == "astm_e1392" else read_csv
+    return {Path(path).stem: reader(path, resample=resample)}
+
+
+def read_measurements(path, *, film=None, resample=False):
+    """Read a measurement file of any supported format.
+
+    Parameters
+    ----------
+    path : str, os.PathLike or sequence of them
+        A bayespig CSV file; an ASTM E1392 file (or a list of them, one per
+        sample); a wide spectral table or its folder (Revigo convention).
+    film : str, optional
+        For spectral tables holding several films: the film id to return.
+    resample : bool
+        Interpolate rows measured at different wavelengths onto the wavelengths
+        they share (with a warning) instead of raising.
+
+    Returns
+    -------
+    MeasurementSet
+
+    Raises
+    ------
+    MeasurementError
+        Every problem found, each naming the file, row and field.
+    """
+    if isinstance(path, MeasurementSet):
+        return path
+    if not isinstance(path, (str, os.PathLike)):
+        return read_astm_e1392(list(path), resample=resample)
+    if not Path(path).exists():
+        raise MeasurementError(Problem("file not found", file=str(path)))
+    kind = file_format(path)
+    if kind == "spectral_table":
+        sets = read_revigo(path)
+        if film is None and len(sets) == 1:
+            return next(iter(sets.values()))
+        if film not in sets:
+            shown = ", ".join(list(sets)[:12]) + (", ..." if len(sets) > 12 else "")
+            raise MeasurementError(
+                Problem(
+                    f"the table holds {len(sets)} films ({shown}); choose one with film=<id> "
+                    "(or read them all with bayespig.data.read_revigo)"
+                    if film is None
+                    else f"no film {film!r} in the table; films: {shown}",
+                    file=str(path),
+                    field="film",
+                )
+            )
+        return sets[film]
+    if kind == "astm_e1392":
+        return read_astm_e1392(path, resample=resample)
+    return read_csv(path, resample=resample)
+
+
+def check_report(path):
+    """What a measurement file holds, for ``bayespig check FILE``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    str
+        The format; per measurement set the samples, roles, substrates (with the
+        derived ``r_s`` range), wavelengths, film groups, and which of the
+        paper's methods 1–4 the samples support (or what is missing).
+
+    Raises
+    ------
+    MeasurementError
+        Listing every problem found (file, row, field), when the file is invalid.
+    """
+    sets = read_all(path)
+    kind = file_format(path)
+    lines = [f"{path}: {kind.replace('_', ' ')} file, valid"]
+    if len(sets) == 1:
+        lines.append(next(iter(sets.values())).summary())
+        return "\n".join(lines)
+    lines.append(f"{len(sets)} films (read one with read_measurements(path, film=<id>))")
+    for film_id, measurements in sets.items():
+        methods = [m for m, s in measurements.supported_methods().items() if s]
+        composition = measurements.metadata.get("composition")
+        what = ""
+        if composition:
+            what = " " + "+".join(
+                f"{p} {r:g}"
+                for p, r in zip(composition["pigments"], composition["mass_ratios"])
+                if r
+            )
+        lines.append(
+            f"  {film_id}:{what}; samples {', '.join(measurements.sample_names)}; "
+            f"methods: {', '.join(methods) or 'none'}"
+        )
+    return "\n".join(lines)

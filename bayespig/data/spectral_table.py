@@ -1,0 +1,349 @@
+"""Wide spectral tables: one row per spectrum (``Name`` + one column per wavelength).
+
+The layout of spectrophotometer exports and of the Revigo data (Geldof et al.
+2018, ``../shared/data/revigo``)::
+
+    Name    400     410     ...
+    01A_b   5.09    5.09    ...
+    01A_ob  4.44    4.43    ...
+    01A_ow  6.73    7.97    ...
+    01A_w   54.83   72.98   ...
+
+Values in percent (the default) or fractions, tab or comma separated. Spectra
+named by the Revigo convention form one measurement set per film id: ``<id>_b``
+and ``<id>_w`` are the bare black and white cards (role ``substrate``),
+``<id>_ob`` and ``<id>_ow`` the paint drawn down over them (films of one film
+group ``<id>`` whose substrates are the measured cards). All are
+directional–hemispherical reflectances of an 8°/d integrating sphere.
+"""
+
+from __future__ import annotations
+
+import re
+from itertools import pairwise
+from pathlib import Path
+
+import numpy as np
+
+from ._assemble import Row, assemble, parse_number
+from .csv_format import _lines
+from .errors import MeasurementError, Problem
+
+__all__ = ["REVIGO_SUFFIXES", "looks_like_spectral_table", "read_revigo", "read_spectral_table"]
+
+#: Revigo spectrum suffix -> (role, substrate suffix).
+REVIGO_SUFFIXES = {
+    "b": ("substrate", None),
+    "w": ("substrate", None),
+    "ob": ("film", "b"),
+    "ow": ("film", "w"),
+}
+_WAVELENGTH = re.compile(r"^\s*(\d+(?:\.\d*)?)\s*(?:nm)?\s*$", re.IGNORECASE)
+_REVIGO_NAME = re.compile(r"^(.+)_(b|w|ob|ow)$")
+_DATA_GLOB = "*spectral-data*.txt"
+_MIXTURE_GLOB = "*mixture-specifications*.txt"
+
+
+def looks_like_spectral_table(path):
+    """True when the first non-blank line is ``Name`` followed by wavelength columns."""
+    try:
+        with open(path, encoding="utf-8-sig", errors="replace") as handle:
+            for line in handle:
+                if line.strip():
+                    cells = re.split(r"[\t,;]", line.strip())
+                    return (
+                        cells[0].strip().lower() == "name"
+                        and len(cells) > 1
+                        and all(_WAVELENGTH.match(c) for c in cells[1:])
+                    )
+    except OSError:
+        return False
+    return False
+
+
+def read_spectral_table(path, *, units="percent"):
+    """Read a wide spectral table.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    units : {"percent", "fraction"}
+
+    Returns
+    -------
+    wavelength_nm : numpy.ndarray
+        Shape (n_wavelengths,) [nm].
+    spectra : dict
+        Name -> ``(values, row)``: values as fractions, shape (n_wavelengths,),
+        and the row (line number) they were read from.
+
+    Raises
+    ------
+    MeasurementError
+        Naming the file, row and column of every problem.
+    """
+    if units not in ("percent", "fraction"):
+        raise ValueError(f"units must be 'percent' or 'fraction', got {units!r}")
+    name = str(path)
+    lines = _lines(path)
+    problems = []
+    header_index = next((i for i, line in enumerate(lines) if line.strip()), None)
+    if header_index is None:
+        raise MeasurementError(Problem("the file is empty", file=name))
+    header_line = lines[header_index]
+    delimiter = "\t" if "\t" in header_line else ("," if "," in header_line else ";")
+    header = [c.strip() for c in header_line.split(delimiter)]
+    if header[0].lower() != "name":
+        problems.append(
+            Problem(
+                f"the first column must be 'Name', got {header[0]!r}",
+                file=name,
+                row=header_index + 1,
+                field=header[0],
+            )
+        )
+    wavelength_nm = []
+    for cell in header[1:]:
+        match = _WAVELENGTH.match(cell)
+        if not match:
+            problems.append(
+                Problem(
+                    f"column {cell!r} is not a wavelength in nm",
+                    file=name,
+                    row=header_index + 1,
+                    field=cell,
+                )
+            )
+        else:
+            wavelength_nm.append(float(match.group(1)))
+    if not wavelength_nm:
+        problems.append(
+            Problem("no wavelength columns", file=name, row=header_index + 1, field="Name")
+        )
+    elif any(b <= a for a, b in pairwise(wavelength_nm)):
+        problems.append(
+            Problem("wavelength columns must be increasing", file=name, row=header_index + 1)
+        )
+    if problems:
+        raise MeasurementError(problems)
+    scale = 0.01 if units == "percent" else 1.0
+    spectra = {}
+    for index in range(header_index + 1, len(lines)):
+        line, row = lines[index], index + 1
+        if not line.strip():
+            continue
+        cells = [c.strip() for c in line.split(delimiter)]
+        if len(cells) != len(header):
+            problems.append(
+                Problem(
+                    f"has {len(cells)} fields but the header has {len(header)}", file=name, row=row
+                )
+            )
+            continue
+        spectrum, values, valid = cells[0], [], True
+        if not spectrum:
+            problems.append(Problem("empty name", file=name, row=row, field="Name"))
+            continue
+        if spectrum in spectra:
+            problems.append(
+                Problem(
+                    f"duplicated row: {spectrum!r} is already in row {spectra[spectrum][1]}",
+                    file=name,
+                    row=row,
+                    field="Name",
+                )
+            )
+            continue
+        for column, cell in zip(header[1:], cells[1:]):
+            try:
+                value = parse_number(cell)
+            except ValueError as error:
+                problems.append(
+                    Problem(str(error) if cell else "empty cell", file=name, row=row, field=column)
+                )
+                valid = False
+                continue
+            if not np.isfinite(value) or value < 0:
+                problems.append(
+                    Problem(
+                        f"value {cell!r} must be a finite number >= 0",
+                        file=name,
+                        row=row,
+                        field=column,
+                    )
+                )
+                valid = False
+            values.append(value * scale)
+        if valid:
+            spectra[spectrum] = (np.array(values), row)
+    if not spectra and not problems:
+        problems.append(Problem("no spectra", file=name, row=header_index + 1))
+    if units == "percent" and spectra and max(v.max() for v, _ in spectra.values()) <= 0.015:
+        problems.append(
+            Problem(
+                "all values are below 1.5 %: they look like fractions; read with units='fraction'",
+                file=name,
+            )
+        )
+    if units == "fraction":
+        for values, row in spectra.values():
+            if values.max() > 1.5:
+                problems.append(
+                    Problem(
+                        f"value {values.max():g} looks like percent; read with units='percent'",
+                        file=name,
+                        row=row,
+                        field=header[1 + int(np.argmax(values))],
+                    )
+                )
+    if problems:
+        raise MeasurementError(problems)
+    return np.array(wavelength_nm), spectra
+
+
+def _read_mixtures(path):
+    """Revigo ``<id>\\t<pigment>-<pigment>|<ratio>-<ratio>`` lines -> id -> composition dict."""
+    compositions = {}
+    for row, line in enumerate(_lines(path), start=1):
+        if not line.strip():
+            continue
+        film_id, _, spec = line.partition("\t")
+        names, _, ratios = spec.strip().partition("|")
+        pigments, parts = names.split("-"), ratios.split("-")
+        try:
+            mass_ratios = [parse_number(p) for p in parts]
+        except ValueError as error:
+            raise MeasurementError(
+                Problem(str(error), file=str(path), row=row, field="ratios")
+            ) from None
+        if len(pigments) != len(mass_ratios) or not film_id.strip():
+            raise MeasurementError(
+                Problem(
+                    f"cannot read composition {line.strip()!r}: expected "
+                    "'<id><TAB><pigment>-<pigment>|<ratio>-<ratio>'",
+                    file=str(path),
+                    row=row,
+                )
+            )
+        compositions[film_id.strip()] = {"pigments": pigments, "mass_ratios": mass_ratios}
+    return compositions
+
+
+def _find(folder, pattern, what):
+    found = sorted(Path(folder).glob(pattern))
+    if len(found) != 1:
+        raise MeasurementError(
+            Problem(
+                f"expected one {what} file matching {pattern!r}, found {len(found)}",
+                file=str(folder),
+            )
+        )
+    return found[0]
+
+
+def read_revigo(path, *, specular="excluded", theta_i=8.0, units="percent", n=1.45):
+    """Read a Revigo-style table into one measurement set per film id.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The folder (holding ``*spectral-data*.txt`` and, optionally,
+        ``*mixture-specifications*.txt``) or the spectral table itself.
+    specular : {"excluded", "included"}
+        Whether the sphere excluded (SCE) or included (SCI) the specular
+        component. The Revigo data do not say; films as dark as 2 % (below the
+        ~3.4 % surface reflection of a binder at 8°) suggest SCE, the default.
+    theta_i : float
+        Incidence angle of the sphere [deg].
+    units : {"percent", "fraction"}
+    n : float
+        Binder refractive index [-].
+
+    Returns
+    -------
+    dict
+        Film id -> :class:`~bayespig.data.model.MeasurementSet` with samples
+        ``<id>_b``, ``<id>_w`` (substrates) and ``<id>_ob``, ``<id>_ow`` (films
+        over them, film group ``<id>``); metadata: ``film_id``, ``composition``
+        (pigments and mass ratios, when the mixture file is there), ``source``,
+        ``instrument``, ``specular_assumed``.
+
+    Raises
+    ------
+    MeasurementError
+        For unreadable files, names outside the ``<id>_b/_w/_ob/_ow``
+        convention, ids without all four spectra.
+    """
+    if specular not in ("excluded", "included"):
+        raise ValueError(f"specular must be 'excluded' or 'included', got {specular!r}")
+    path = Path(path)
+    if path.is_dir():
+        table = _find(path, _DATA_GLOB, "spectral data")
+        mixtures = sorted(path.glob(_MIXTURE_GLOB))
+    else:
+        table = path
+        mixtures = sorted(path.parent.glob(_MIXTURE_GLOB))
+    compositions = _read_mixtures(mixtures[0]) if len(mixtures) == 1 else {}
+    wavelength_nm, spectra = read_spectral_table(table, units=units)
+    file = str(table)
+    problems, by_id = [], {}
+    for spectrum, (values, row) in spectra.items():
+        match = _REVIGO_NAME.match(spectrum)
+        if not match:
+            problems.append(
+                Problem(
+                    f"name {spectrum!r} does not follow the convention <id>_b, <id>_w (bare black "
+                    "and white cards), <id>_ob, <id>_ow (paint over them)",
+                    file=file,
+                    row=row,
+                    field="Name",
+                )
+            )
+            continue
+        by_id.setdefault(match.group(1), {})[match.group(2)] = (spectrum, values, row)
+    for film_id, parts in by_id.items():
+        missing = [f"{film_id}_{s}" for s in REVIGO_SUFFIXES if s not in parts]
+        if missing:
+            first_row = min(row for _, _, row in parts.values())
+            problems.append(
+                Problem(
+                    f"film {film_id!r} lacks the spectra {', '.join(missing)}",
+                    file=file,
+                    row=first_row,
+                    field="Name",
+                )
+            )
+    if problems:
+        raise MeasurementError(problems)
+    geometry = f"{theta_i:g}d-{'sci' if specular == 'included' else 'sce'}"
+    sets = {}
+    for film_id, parts in by_id.items():
+        rows = []
+        for suffix, (role, substrate) in REVIGO_SUFFIXES.items():
+            spectrum, values, row = parts[suffix]
+            attributes = {"role": role}
+            if role == "film":
+                attributes.update(substrate=f"{film_id}_{substrate}", film_group=film_id)
+            rows.append(
+                Row(
+                    file,
+                    row,
+                    spectrum,
+                    "hemispherical",
+                    geometry,
+                    values,
+                    attributes,
+                    {"role": "Name", "substrate": "Name", "film_group": "Name"},
+                    [f"{w:g}" for w in wavelength_nm],
+                )
+            )
+        metadata = {
+            "film_id": film_id,
+            "source": file,
+            "instrument": geometry,
+            "specular_assumed": specular,
+        }
+        if film_id in compositions:
+            metadata["composition"] = compositions[film_id]
+        sets[film_id] = assemble(rows, wavelength_nm, n=n, metadata=metadata, source=file)
+    return sets

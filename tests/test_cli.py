@@ -1,0 +1,34 @@
+"""The ``bayespig`` command: exit statuses and what it writes."""
+
+import numpy as np
+
+from bayespig import read_measurements
+from bayespig.cli import main
+
+
+def test_simulate_then_check_round_trip(tmp_path, capsys):
+    out = tmp_path / "film.csv"
+    assert main(["simulate", "--a", "0.1", "--tau", "1.0", "--design", "method4", "--seed", "3",
+                 "--out", str(out)]) == 0
+    measurements = read_measurements(out)
+    assert measurements.metadata["seed"] == 3
+    assert np.all(np.asarray(measurements.metadata["truth"]["a"]) == 0.1)
+    capsys.readouterr()
+    assert main(["check", str(out)]) == 0
+    report = capsys.readouterr().out
+    assert "method4: yes" in report and "method1: no" in report
+
+
+def test_check_bad_file_exits_2_naming_row_and_field(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("sample,role,measurement,geometry,400\nfilm,film,brdf,45as15,nan\n")
+    assert main(["check", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert str(bad) in err and "row 2" in err
+
+
+def test_unknown_instrument_is_a_clear_error(tmp_path, capsys):
+    assert main(["simulate", "--a", "0.1", "--tau", "1", "--instrument", "nope",
+                 "--out", str(tmp_path / "x.csv")]) == 2
+    assert "multi-angle-45" in capsys.readouterr().err
+    assert not (tmp_path / "x.csv").exists()
