@@ -34,6 +34,9 @@ TAU_GRID = np.logspace(-2, 2, GRID_SIZE)
 #: Every k-th tau column for the partial-grid run of anisotropic scattering.
 TAU_STRIDE = 8
 IADPYTHON_SUBSET = 48
+#: bayespig quadratures timed: the default (converged far below 1e-4) and the smallest
+#: that still reaches 1e-4, for the comparison "at equal accuracy".
+BAYESPIG_POINTS = (DEFAULT_QUADRATURE_POINTS, 6)
 #: Reference quadrature for the accuracy column (bayespig: points per interval).
 ACCURACY_POINTS = 32
 ACCURACY_SUBSET = 24
@@ -64,12 +67,12 @@ def iadpython_time(points, g, quad_pts):
     return (time.perf_counter() - start) / len(points), np.column_stack([ur1, ut1])
 
 
-def bayespig_accuracy(g, rng):
-    """Max relative change of the BRDF from the default quadrature to ACCURACY_POINTS."""
+def bayespig_accuracy(g, rng, n_points=DEFAULT_QUADRATURE_POINTS):
+    """Max relative change of the BRDF from ``n_points`` per interval to ACCURACY_POINTS."""
     a = rng.choice(A_GRID, ACCURACY_SUBSET)
     tau = rng.choice(TAU_GRID, ACCURACY_SUBSET)
     geometry = (THETA_I[:, None], THETA_O[:, None], DELTA_PHI[:, None])
-    default = bayespig.brdf(*geometry, a=a, tau=tau, g=g, n=N_BINDER)
+    default = bayespig.brdf(*geometry, a=a, tau=tau, g=g, n=N_BINDER, n_points=n_points)
     fine = bayespig.brdf(*geometry, a=a, tau=tau, g=g, n=N_BINDER, n_points=ACCURACY_POINTS)
     return float(np.max(np.abs(default / fine - 1.0)))
 
@@ -97,28 +100,30 @@ def main(argv=None):
     print("-" * len(header))
     for g in (0.0, 0.5):
         taus = TAU_GRID if (g == 0.0 or args.full) else TAU_GRID[::TAU_STRIDE]
-        wall, f = bayespig_time(g, taus)
-        n_points = A_GRID.size * taus.size
-        if not np.all(np.isfinite(f)):
-            raise RuntimeError("bayespig returned non-finite BRDF values")
-        per_point = wall / n_points
-        accuracy = bayespig_accuracy(g, rng)
         subset = np.column_stack([rng.choice(A_GRID, IADPYTHON_SUBSET),
                                   rng.choice(TAU_GRID, IADPYTHON_SUBSET)])
         _, iad_reference = iadpython_time(subset, g, 48)
-        label = f"{GRID_SIZE}x{taus.size}"
+        iad_runs = []
         for quad in (quad_equal, 16):
             iad_per_point, iad_values = iadpython_time(subset, g, quad)
-            iad_accuracy = float(np.max(np.abs(iad_values - iad_reference)))
-            print(f"{g:>4} {label:>16} {wall:>9.2f} {1e3 * per_point:>9.3f} {accuracy:>13.1e} "
-                  f"{quad:>9d} {1e3 * iad_per_point:>10.3f} {iad_accuracy:>16.1e} "
-                  f"{iad_per_point / per_point:>8.2f}x")
+            iad_runs.append((quad, iad_per_point, float(np.max(np.abs(iad_values - iad_reference)))))
+        for bp_points in BAYESPIG_POINTS:
+            wall, f = bayespig_time(g, taus, bp_points)
+            if not np.all(np.isfinite(f)):
+                raise RuntimeError("bayespig returned non-finite BRDF values")
+            per_point = wall / (A_GRID.size * taus.size)
+            accuracy = bayespig_accuracy(g, rng, bp_points)
+            label = f"{GRID_SIZE}x{taus.size} n{bp_points}"
+            for quad, iad_per_point, iad_accuracy in iad_runs:
+                print(f"{g:>4} {label:>16} {wall:>9.2f} {1e3 * per_point:>9.3f} {accuracy:>13.1e} "
+                      f"{quad:>9d} {1e3 * iad_per_point:>10.3f} {iad_accuracy:>16.1e} "
+                      f"{iad_per_point / per_point:>8.2f}x")
     print()
     print("bayespig: one batched brdf call per g; 'points' = (a, tau) pairs, each giving the BRDF at")
     print(f"  all 6 geometries. With g = 0.5 only every {TAU_STRIDE}th tau column is timed unless "
           "--full")
     print("  (per-point cost is set by the doublings, so the columns span the whole tau range).")
-    print(f"bayespig acc: max relative change of the 6 BRDFs, default quadrature vs "
+    print(f"bayespig acc: max relative change of the 6 BRDFs, 'nK' = K points per interval, vs "
           f"n_points={ACCURACY_POINTS}, {ACCURACY_SUBSET} random grid points.")
     print(f"iadpython: totals at normal incidence only (it cannot do oblique incidence), timed on "
           f"{IADPYTHON_SUBSET} random grid points")

@@ -33,6 +33,7 @@ from .quadrature import DEFAULT_QUADRATURE_POINTS, binder_quadrature
 
 __all__ = [
     "START_THICKNESS",
+    "START_THICKNESS_HIGHER_MODES",
     "single_scattering_layer",
     "start_layer",
     "double",
@@ -47,6 +48,9 @@ __all__ = [
 #: absorption it leaves is ~1e-10 per unit tau; thinner starts lose to round-off
 #: (see reports/validation.md).
 START_THICKNESS = 2.0**-22
+#: Starting thickness for azimuthal modes m >= 1. They carry no energy, so the start
+#: error there is only the O(d^3) local error and a much thicker start is as accurate.
+START_THICKNESS_HIGHER_MODES = 2.0**-14
 #: Doubling of an opaque layer stops once the total transmittance is below this.
 OPAQUE_TRANSMITTANCE = 1e-11
 #: Upper bound on doublings for the opaque limit (2^-22 * 2^80 is far beyond any film).

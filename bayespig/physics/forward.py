@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .adding_doubling import START_THICKNESS, add_lambertian_substrate, layer_mode
+from .adding_doubling import START_THICKNESS, START_THICKNESS_HIGHER_MODES, add_lambertian_substrate, layer_mode
 from .fresnel import fresnel_reflectance, normal_transmittance, refracted_cosine
 from .phase import is_rayleigh, n_fourier_modes, normalise_on_quadrature, phase_fourier_modes
 from .quadrature import DEFAULT_QUADRATURE_POINTS, binder_quadrature
@@ -39,8 +39,10 @@ __all__ = [
     "validate_layer_arguments",
 ]
 
-#: A Fourier mode is negligible once it is this small relative to mode 0, twice in a row.
-MODE_TOLERANCE = 1e-7
+#: A Fourier mode is negligible once it is this small relative to mode 1 (at the same
+#: geometry and parameters), twice in a row; modes of Henyey-Greenstein decay
+#: geometrically, so the rest sums to about as much.
+MODE_TOLERANCE = 1e-6
 #: Parameter sets solved together (memory: chunk x nodes^2 x 8 bytes per kernel).
 CHUNK = 256
 #: Threads solving chunks concurrently.
@@ -311,22 +313,34 @@ def _solve_chunk(geometry, a, tau, p_refl, p_trans, adaptive, start_thickness, i
     """Adding–doubling plus the surface (eq. 8) and substrate-law terms (eq. 3) for one chunk."""
     f_modes = []
     terms = {}
-    quiet = 0
+    # each value (parameter set x geometry) stops at its own converged mode, so a result
+    # never depends on which other parameter sets or geometries share the call
+    quiet = None
+    n_used = None
     for m in range(p_refl.shape[0]):
-        R, T, direct = layer_mode(geometry.mu, geometry.weight, a, tau, p_refl[m], p_trans[m], start_thickness)
+        thickness = start_thickness if m == 0 else max(start_thickness, START_THICKNESS_HIGHER_MODES)
+        R, T, direct = layer_mode(geometry.mu, geometry.weight, a, tau, p_refl[m], p_trans[m], thickness)
         if m == 0 and included_substrate is not None:
             R = add_lambertian_substrate(R, T, direct, geometry.c, included_substrate)
         mode = surface_mode(geometry, R, T, direct, m == 0)
         f_modes.append(mode.pop("f_mode"))
         if m == 0:
             terms.update(mode)
-            reference = np.abs(f_modes[0]).max(axis=(1, 2))
+            quiet = np.zeros(f_modes[0].shape, dtype=int)
+            n_used = np.full(f_modes[0].shape, p_refl.shape[0])
+        elif m == 1:
+            # modes >= 1 do not see the substrate: measuring them against mode 1 makes the
+            # truncation the same whether the substrate enters by eq. (3) or by a direct solve
+            reference = np.maximum(np.abs(f_modes[1]), 1e-300)
         elif adaptive:
-            size = (np.abs(f_modes[-1]).max(axis=(1, 2)) / np.maximum(reference, 1e-300)).max()
-            quiet = quiet + 1 if size < MODE_TOLERANCE else 0
-            if quiet == 2:
+            small = np.abs(f_modes[-1]) / reference < MODE_TOLERANCE
+            quiet = np.where(small, quiet + 1, 0)
+            n_used = np.where((quiet == 2) & (n_used > m), m + 1, n_used)
+            if (n_used <= m + 1).all():
                 break
-    terms["f0_modes"] = np.stack(f_modes, axis=1)
+    f_modes = np.stack(f_modes, axis=1)
+    f_modes[np.arange(f_modes.shape[1])[None, :, None, None] >= n_used[:, None]] = 0.0
+    terms["f0_modes"] = f_modes
     return terms
 
 
