@@ -12,6 +12,8 @@ __version__ = "0.1.0"
 from .instruments import get_instrument, predict  # noqa: E402  (table needs __version__)
 from .table import load_table  # noqa: E402
 from .data import MeasurementError, MeasurementSet, read_measurements, simulate  # noqa: E402
+from .fit import fit_measurements, fit_problem  # noqa: E402
+from .studies.robustness import robustness_study  # noqa: E402
 
 __all__ = [
     "brdf",
@@ -25,4 +27,7 @@ __all__ = [
     "simulate",
     "MeasurementSet",
     "MeasurementError",
+    "fit_problem",
+    "fit_measurements",
+    "robustness_study",
 ]

@@ -7,7 +7,6 @@ import json
 import sys
 import time
 import warnings
-from pathlib import Path
 
 import numpy as np
 
@@ -63,7 +62,8 @@ def _table_build(args):
         print(f"bayespig: warning: {warning.message}", file=sys.stderr)
     path = table_path(table.key)
     print(f"{table!r}")
-    print(f"  file {path} ({path.stat().st_size / 1e6:.2f} MB), ready in {time.perf_counter() - start:.1f} s")
+    elapsed = time.perf_counter() - start
+    print(f"  file {path} ({path.stat().st_size / 1e6:.2f} MB), ready in {elapsed:.1f} s")
     return 0
 
 
@@ -84,11 +84,12 @@ def _describe_cache_file(path):
 
 
 def _format_settings(settings):
-    g = "isotropic" if settings["g_range"] is None else f"g in {settings['g_range']} ({settings['n_g']} nodes)"
-    return (f"{g}; a: {settings['n_a']} nodes (stretch {settings['a_stretch']:g}); "
-            f"tau: 2^{settings['log2_tau_min']}..2^{settings['log2_tau_max']}, {settings['per_octave']}/octave, "
-            f"+ opaque; quadrature {settings['n_points']} points/interval, "
-            f"start thickness {settings['start_thickness']:.3g}")
+    s = settings
+    g = "isotropic" if s["g_range"] is None else f"g in {s['g_range']} ({s['n_g']} nodes)"
+    return (f"{g}; a: {s['n_a']} nodes (stretch {s['a_stretch']:g}); "
+            f"tau: 2^{s['log2_tau_min']}..2^{s['log2_tau_max']}, {s['per_octave']}/octave, "
+            f"+ opaque; quadrature {s['n_points']} points/interval, "
+            f"start thickness {s['start_thickness']:.3g}")
 
 
 def _table_info(args):
@@ -112,7 +113,8 @@ def _table_info(args):
         labels = ", ".join(ch["label"] for ch in instrument["channels"])
         print(f"{info['key']}  {size}  {name}  n = {instrument['n']:g}  "
               f"[channels: {labels}]  bayespig {info['version']}")
-        print(f"    {_format_settings(info['settings'])}" + ("" if info["status"] == "ok" else f"  ({info['status']})"))
+        status = "" if info["status"] == "ok" else f"  ({info['status']})"
+        print(f"    {_format_settings(info['settings'])}{status}")
     what = f" for instrument {args.instrument!r}" if args.instrument else ""
     print(f"{shown} cached table{'s' if shown != 1 else ''}{what}")
     return 0
@@ -148,11 +150,12 @@ def build_parser():
     table_sub = table.add_subparsers(dest="table_command", required=True)
     build = table_sub.add_parser("build", help="build (or load) the cached table of an instrument")
     build.add_argument("--instrument", required=True,
-                       help="built-in name (multi-angle-45, multi-angle-45-15, 8d-sci, 8d-sce, 45-0) "
-                            "or comma-separated geometry labels such as 45as15,45as110")
+                       help="built-in name (multi-angle-45, multi-angle-45-15, 8d-sci, 8d-sce, "
+                            "45-0) or comma-separated geometry labels such as 45as15,45as110")
     build.add_argument("--g", choices=("isotropic", "free"), default="isotropic",
                        help="isotropic scattering only (default) or a g axis")
-    build.add_argument("--n", type=float, default=1.45, help="binder refractive index (default 1.45)")
+    build.add_argument("--n", type=float, default=1.45,
+                       help="binder refractive index (default 1.45)")
     build.add_argument("--rebuild", action="store_true", help="ignore any cached file")
     build.set_defaults(func=_table_build)
     info = table_sub.add_parser("info", help="list the cached tables")
@@ -173,6 +176,10 @@ def build_parser():
     simulate.add_argument("--seed", type=int, default=0)
     simulate.add_argument("--out", required=True, help="CSV file to write")
     simulate.set_defaults(func=_simulate)
+
+    from .commands import robustness
+
+    robustness.add_robustness_parser(sub)
     return parser
 
 

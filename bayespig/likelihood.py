@@ -29,6 +29,7 @@ __all__ = [
     "Priors",
     "ForwardModel",
     "LogPosterior",
+    "WavelengthModel",
     "multiplicative_normal_logpdf",
 ]
 
@@ -186,12 +187,32 @@ class Priors:
 
     ``a`` uniform on ``a_range``; each ``tau`` log-uniform on ``tau_range``; ``g``
     uniform on ``g_range`` when free; ``eps`` log-uniform on ``eps_range`` when inferred.
+    In the sampled coordinates ``[a, log tau, g, log eps]`` every prior is flat on a box.
+
+    Raises
+    ------
+    ValueError
+        Naming the range that is empty or outside the parameter's domain.
     """
 
     a_range: tuple = (0.0, 1.0)
     tau_range: tuple = (0.01, 100.0)
     g_range: tuple = (-0.5, 0.8)
     eps_range: tuple = (1e-3, 0.5)
+
+    def __post_init__(self):
+        domains = {"a_range": (0.0, 1.0, True), "tau_range": (0.0, np.inf, False),
+                   "g_range": (-1.0, 1.0, False), "eps_range": (0.0, np.inf, False)}
+        for name, (low, high, closed) in domains.items():
+            try:
+                lo, hi = (float(v) for v in getattr(self, name))
+            except (TypeError, ValueError):
+                raise ValueError(f"{name} must be a pair of numbers (low, high)") from None
+            inside = (low <= lo and hi <= high) if closed else (low < lo and hi < high)
+            if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi and inside):
+                bracket = "[{}, {}]" if closed else "({}, {})"
+                raise ValueError(f"{name} must satisfy low < high inside {bracket.format(low, high)}, "
+                                 f"got {getattr(self, name)}")
 
     def describe(self):
         """One line per parameter, for reports."""
@@ -224,6 +245,8 @@ class ForwardModel:
     def __post_init__(self):
         from .table import load_table
 
+        if self.g not in ("isotropic", "free"):
+            raise ValueError(f"g must be 'isotropic' or 'free', got {self.g!r}")
         self._film_tables = []
         for film in self.problem.films:
             if film.kind == "transmittance":
@@ -233,11 +256,20 @@ class ForwardModel:
             if table is None:
                 table = load_table(film.instrument, g=self.g, n=self.problem.n, progress=False)
                 self.tables[film.instrument] = table
+            if table.free_g != (self.g == "free"):
+                raise ValueError(f"tables: the table for {film.instrument.name!r} is "
+                                 f"{'g-free' if table.free_g else 'isotropic'}, the model g={self.g!r}")
             self._film_tables.append(table)
         self.table_keys = tuple(sorted({t.key for t in self._film_tables if t is not None}))
+        self._stencils = {}
+
+    @property
+    def film_tables(self):
+        """The look-up table of every film (None for a transmittance), in film order."""
+        return tuple(self._film_tables)
 
     def predict(self, index, a, tau, g=0.0):
-        """Predicted values at wavelength ``index``.
+        """Predicted values at wavelength ``index`` (through each table's own interpolation).
 
         Parameters
         ----------
@@ -268,12 +300,195 @@ class ForwardModel:
                 parts.append(table(a=a, tau=film_tau, g=g, r_s=film.r_s[index]))
         return np.concatenate(parts, axis=-1)
 
+    def at_wavelength(self, index):
+        """The fast evaluator of :meth:`predict` at one wavelength (see :class:`WavelengthModel`)."""
+        return WavelengthModel(self, index)
+
+    def _stencil_table(self, table):
+        if table.key not in self._stencils:
+            self._stencils[table.key] = _StencilTable(table)
+        return self._stencils[table.key]
+
+
+# ---------------------------------------------------------------------------------------------
+# fast path: one wavelength; interpolation stencils shared by the films of one table and group
+
+
+#: Cubic Lagrange weights on nodes 0, 1, 2, 3 as polynomials in t: ``w = [1, t, t^2, t^3] @ M``.
+_LAGRANGE_MATRIX = np.array([
+    [1.0, 0.0, 0.0, 0.0],
+    [-11.0 / 6.0, 3.0, -1.5, 1.0 / 3.0],
+    [1.0, -2.5, 2.0, -0.5],
+    [-1.0 / 6.0, 0.5, -0.5, 1.0 / 6.0],
+])
+_POWERS = np.arange(4.0)
+_OFFSETS = np.arange(4)
+
+
+def _lagrange_weights(x, x0, dx, n):
+    """Start index and cubic Lagrange weights on a uniform axis (the look-up table's stencil).
+
+    The stencil starts one node below ``x`` and is clamped to the axis, as in
+    :mod:`bayespig.table`, so that ``x`` beyond the end nodes extrapolates the
+    end stencil.
+    """
+    pos = (x - x0) / dx
+    start = np.floor(np.minimum(np.maximum(pos, 1.0), n - 3.0)).astype(np.intp) - 1
+    t = pos - start
+    return start, (t[:, None] ** _POWERS) @ _LAGRANGE_MATRIX
+
+
+class _StencilTable:
+    """A look-up table's arrays stacked for one gather per call.
+
+    The table interpolates ``log q``, ``log D``, ``log U`` and ``R_up`` with the same
+    tensor-product stencil (:mod:`bayespig.table`); interpolation is linear, so
+    ``log D + log U`` is interpolated as one quantity and all of them come from one
+    gather of ``(2 K + 1)``-vectors. Rows are ``(g, a, tau)`` node triples; the opaque
+    slice (eq. 2) is a separate ``(g, a)`` array.
+    """
+
+    def __init__(self, table):
+        settings = table.settings
+        arrays = table.arrays
+        log_q = arrays["log_q"]
+        self.n_g, self.n_a, self.n_tau_rows, self.n_channels = log_q.shape
+        stacked = np.concatenate([log_q, arrays["log_d"] + arrays["log_u"], arrays["r_up"][..., None]], axis=-1)
+        self.finite = np.ascontiguousarray(stacked.reshape(-1, stacked.shape[-1]))
+        self.opaque = np.ascontiguousarray(log_q[:, :, -1, :].reshape(-1, self.n_channels))
+        self.a_stretch = settings.a_stretch
+        self.asinh_stretch = np.arcsinh(settings.a_stretch)
+        v_nodes = settings.v_nodes
+        self.du = v_nodes[1] - v_nodes[0]
+        log_tau = np.log(settings.tau_nodes)
+        self.x0, self.dx, self.n_tau = log_tau[0], log_tau[1] - log_tau[0], log_tau.size
+        self.tau_min, self.tau_max = settings.tau_nodes[0], settings.tau_nodes[-1]
+        g_nodes = settings.g_nodes
+        self.g0 = g_nodes[0]
+        self.dg = g_nodes[1] - g_nodes[0] if g_nodes.size > 1 else 1.0
+        # an opaque film of a = 1 reflects only what the table adds for specular-included channels
+        self.specular = table(a=1.0, tau=np.inf)
+
+    def _a_g_rows(self, a, g):
+        """Row offsets and weights of the (g, a) stencil, shapes (W, S) with S = 4 or 16."""
+        u = np.arcsinh(self.a_stretch * np.sqrt(a)) / self.asinh_stretch
+        su, wu = _lagrange_weights(u, 0.0, self.du, self.n_a)
+        rows = su[:, None] + _OFFSETS
+        if self.n_g == 1:
+            return rows, wu
+        if g is None:
+            g = np.zeros(a.shape)
+        sg, wg = _lagrange_weights(g, self.g0, self.dg, self.n_g)
+        rows = ((sg[:, None] + _OFFSETS) * self.n_a)[:, :, None] + rows[:, None, :]
+        weights = wg[:, :, None] * wu[:, None, :]
+        return rows.reshape(rows.shape[0], -1), weights.reshape(rows.shape[0], -1)
+
+    def interpolate_finite(self, a, tau, g):
+        """``log q``, ``log D + log U`` (W, K each) and ``R_up`` (W,) at tau >= tau_min."""
+        rows, weights = self._a_g_rows(a, g)
+        sx, wx = _lagrange_weights(np.log(tau), self.x0, self.dx, self.n_tau)
+        index = (rows * self.n_tau_rows)[:, :, None] + (1 + sx[:, None] + _OFFSETS)[:, None, :]
+        weights = weights[:, :, None] * wx[:, None, :]
+        w = weights.shape[0]
+        values = np.matmul(weights.reshape(w, 1, -1), self.finite.take(index.reshape(w, -1), axis=0))[:, 0]
+        k = self.n_channels
+        return values[:, :k], values[:, k:2 * k], values[:, 2 * k]
+
+    def interpolate_opaque(self, a, g):
+        """``log q`` of the opaque slice, (W, K)."""
+        rows, weights = self._a_g_rows(a, g)
+        return np.matmul(weights[:, None, :], self.opaque.take(rows, axis=0))[:, 0]
+
+
+class WavelengthModel:
+    """Fast predictions of every film at one wavelength, equal to :meth:`ForwardModel.predict`.
+
+    Everything that does not depend on the parameters is prepared once: the
+    stacked table arrays, each film's substrate albedo ``r_s`` at this wavelength
+    and the films that share a table and a film group (the same film on black and
+    on white, method 4), which share one interpolation. Values below the tables'
+    first ``tau`` node (outside the default prior) go through the tables themselves.
+
+    Parameters
+    ----------
+    model : ForwardModel
+    index : int
+        Wavelength index.
+    """
+
+    def __init__(self, model, index):
+        problem = model.problem
+        if not 0 <= index < problem.n_wavelengths:
+            raise ValueError(f"index must lie in [0, {problem.n_wavelengths}), got {index}")
+        self.model = model
+        self.index = int(index)
+        self.n_values = problem.n_values
+        self._units = {}
+        self._transmittance = []
+        self._t_normal = float(specular_transmittance(0.0, problem.n))
+        start = 0
+        for film, table in zip(problem.films, model.film_tables):
+            stop = start + film.observed.shape[1]
+            column = -1 if film.opaque else problem.groups.index(film.group)
+            if film.kind == "transmittance":
+                self._transmittance.append((slice(start, stop), column))
+            else:
+                stencil = model._stencil_table(table)
+                unit = self._units.setdefault((table.key, column), (stencil, column, []))
+                unit[2].append((slice(start, stop), float(film.r_s[index])))
+            start = stop
+        self._tau_min = min([u[0].tau_min for u in self._units.values() if u[1] >= 0], default=0.0)
+
+    def __call__(self, a, tau, g=None):
+        """Predicted values, shape (W, n_values).
+
+        Parameters
+        ----------
+        a : numpy.ndarray
+            Shape (W,) [-].
+        tau : numpy.ndarray
+            Shape (W, n_groups) [-], finite.
+        g : numpy.ndarray, optional
+            Shape (W,) [-]; None for 0 (isotropic).
+        """
+        a = np.asarray(a, dtype=float)
+        tau = np.asarray(tau, dtype=float).reshape(a.shape[0], -1)
+        g = None if g is None else np.asarray(g, dtype=float)
+        out = np.empty((a.shape[0], self.n_values))
+        omega = np.maximum(1.0 - a, 0.0)[:, None]
+        small = None
+        if self._tau_min > 0 and tau.size and tau.min() < self._tau_min:
+            small = (tau < self._tau_min).any(axis=1)
+            tau_fast = np.where(small[:, None], 1.0, tau)
+        else:
+            tau_fast = tau
+        for stencil, column, films in self._units.values():
+            if column < 0:
+                base = omega * np.exp(stencil.interpolate_opaque(a, g)) + stencil.specular
+                for part, _ in films:
+                    out[:, part] = base
+                continue
+            film_tau = tau_fast[:, column]
+            log_q, log_du, r_up = stencil.interpolate_finite(a, film_tau, g)
+            black = (omega * -np.expm1(-film_tau)[:, None]) * np.exp(log_q) + stencil.specular
+            through = np.exp(log_du)
+            for part, r_s in films:
+                out[:, part] = black + (r_s / (1.0 - r_s * r_up))[:, None] * through
+        for part, column in self._transmittance:
+            out[:, part] = self._t_normal * np.exp(-tau[:, column])[:, None]
+        if small is not None:
+            g_small = np.zeros(small.sum()) if g is None else g[small]
+            out[small] = self.model.predict(self.index, a[small], tau[small], g_small)
+        return out
+
 
 class LogPosterior:
     """Vectorised log-posterior at one wavelength, over ``theta`` of shape (n_walkers, n_dim).
 
     Parameters are ``[a, log tau_1, ..., log tau_G, (g), (log eps)]``: with the
-    default priors the density is flat in ``a`` and in each ``log tau``.
+    priors of :class:`Priors` the density is flat in every sampled coordinate on a
+    box, so the log-posterior equals the log-likelihood of eq. (7) inside the box
+    (up to the prior's normalising constant) and ``-inf`` outside.
 
     Parameters
     ----------
@@ -284,10 +499,32 @@ class LogPosterior:
     g : {"isotropic", "free"}
         Whether ``g`` is a parameter (otherwise 0).
     eps : float or None
-        Known relative error for films without their own; None infers it.
+        Known relative error for films without their own; None infers one ``eps``
+        (shared by the samples of this wavelength) for the films without their own.
+
+    References
+    ----------
+    Ershov, Voloboy & Pozdnyakov (2023), eq. (7) (noise model).
     """
 
     def __init__(self, model, index, priors=Priors(), g="isotropic", eps=0.05):
+        if g not in ("isotropic", "free"):
+            raise ValueError(f"g must be 'isotropic' or 'free', got {g!r}")
+        if g == "free" and model.g != "free":
+            raise ValueError("g='free' needs a ForwardModel with g='free' (tables with a g axis)")
+        if eps is not None and not (np.isfinite(eps) and eps > 0):
+            raise ValueError(f"eps must be a positive number or None (inferred), got {eps!r}")
+        for table in model.film_tables:
+            if table is None:
+                continue
+            tau_max = table.settings.tau_nodes[-1]
+            if priors.tau_range[1] > tau_max:
+                raise ValueError(f"priors.tau_range reaches {priors.tau_range[1]:g}, beyond the look-up "
+                                 f"table's largest finite tau {tau_max:g}")
+            if g == "free" and not (table.settings.g_range[0] <= priors.g_range[0]
+                                    and priors.g_range[1] <= table.settings.g_range[1]):
+                raise ValueError(f"priors.g_range {priors.g_range} must lie inside the table's "
+                                 f"g range {table.settings.g_range}")
         self.model = model
         self.index = index
         self.priors = priors
@@ -296,13 +533,27 @@ class LogPosterior:
         known = model.problem.known_eps(eps)
         self.infer_eps = bool(np.isnan(known).any())
         self.eps = known
+        self._unknown = np.isnan(known)
+        self._inv_known = np.where(self._unknown, 0.0, 1.0 / np.where(self._unknown, 1.0, known))
+        self._log_known = np.log(np.where(self._unknown, 1.0, known))
         self.n_groups = len(model.problem.groups)
+        self.evaluate = model.at_wavelength(index)
         names = ["a"] + [f"log_tau[{g}]" for g in model.problem.groups]
         if self.free_g:
             names.append("g")
         if self.infer_eps:
             names.append("log_eps")
         self.parameter_names = tuple(names)
+        low = [priors.a_range[0]] + [np.log(priors.tau_range[0])] * self.n_groups
+        high = [priors.a_range[1]] + [np.log(priors.tau_range[1])] * self.n_groups
+        if self.free_g:
+            low.append(priors.g_range[0])
+            high.append(priors.g_range[1])
+        if self.infer_eps:
+            low.append(np.log(priors.eps_range[0]))
+            high.append(np.log(priors.eps_range[1]))
+        self.lower = np.array(low)
+        self.upper = np.array(high)
 
     @property
     def n_dim(self):
@@ -317,33 +568,47 @@ class LogPosterior:
         k = 1 + self.n_groups
         g = theta[:, k] if self.free_g else np.zeros(theta.shape[0])
         k += self.free_g
-        eps = np.exp(theta[:, k])[:, None] * np.ones_like(self.eps) if self.infer_eps else self.eps[None, :]
+        if self.infer_eps:
+            eps = np.where(self._unknown, np.exp(theta[:, k])[:, None], self.eps)
+        else:
+            eps = self.eps[None, :]
         return a, tau, g, eps
 
     def in_support(self, theta):
         """Boolean mask of parameter vectors inside the prior's support."""
         theta = np.atleast_2d(theta)
-        p = self.priors
-        ok = (theta[:, 0] >= p.a_range[0]) & (theta[:, 0] <= p.a_range[1])
-        log_tau = theta[:, 1:1 + self.n_groups]
-        ok &= ((log_tau >= np.log(p.tau_range[0])) & (log_tau <= np.log(p.tau_range[1]))).all(axis=1)
-        k = 1 + self.n_groups
-        if self.free_g:
-            ok &= (theta[:, k] >= p.g_range[0]) & (theta[:, k] <= p.g_range[1])
-            k += 1
-        if self.infer_eps:
-            ok &= (theta[:, k] >= np.log(p.eps_range[0])) & (theta[:, k] <= np.log(p.eps_range[1]))
-        return ok & np.isfinite(theta).all(axis=1)
+        return ((theta >= self.lower) & (theta <= self.upper)).all(axis=1)
 
-    def log_likelihood(self, theta):
-        """Log-likelihood per parameter vector (``-inf`` outside the support)."""
-        theta = np.atleast_2d(theta)
-        out = np.full(theta.shape[0], -np.inf)
+    def log_likelihood(self, theta, pointwise=False):
+        """Log-likelihood of eq. (7) per parameter vector (``-inf`` outside the support).
+
+        With ``pointwise=True`` the terms per measured value, shape (n, n_values).
+        """
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
         ok = self.in_support(theta)
-        if ok.any():
-            a, tau, g, eps = self.unpack(theta[ok])
-            model = self.model.predict(self.index, a, tau, g)
-            out[ok] = multiplicative_normal_logpdf(self.observed, model, eps).sum(axis=-1)
+        everywhere = ok.all()
+        if not (everywhere or ok.any()):
+            return np.full((theta.shape[0], self.observed.size) if pointwise else theta.shape[0], -np.inf)
+        inside = theta if everywhere else theta[ok]
+        k = 1 + self.n_groups
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            model = self.evaluate(inside[:, 0], np.exp(inside[:, 1:k]), inside[:, k] if self.free_g else None)
+            inv_eps, log_eps = self._inv_known, self._log_known
+            if self.infer_eps:
+                log_eps_free = inside[:, k + self.free_g][:, None]
+                inv_eps = np.where(self._unknown, np.exp(-log_eps_free), inv_eps)
+                log_eps = log_eps + log_eps_free * self._unknown
+            z = (self.observed / model - 1.0) * inv_eps
+            if pointwise:
+                value = -0.5 * z * z - np.log(model) - log_eps - 0.5 * _LOG_2PI
+            else:
+                value = (-0.5 * (z * z).sum(axis=1) - np.log(model).sum(axis=1)
+                         - (log_eps.sum(axis=-1) + 0.5 * _LOG_2PI * z.shape[1]))
+        value[~np.isfinite(value)] = -np.inf
+        if everywhere:
+            return value
+        out = np.full((theta.shape[0],) + value.shape[1:], -np.inf)
+        out[ok] = value
         return out
 
     def __call__(self, theta):

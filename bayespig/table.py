@@ -35,7 +35,7 @@ import numpy as np
 
 from . import __version__
 from .instruments import Instrument, channel_directions, get_instrument
-from .physics.adding_doubling import START_THICKNESS, double, layer_mode, start_layer
+from .physics.adding_doubling import START_THICKNESS, START_THICKNESS_HIGHER_MODES, double, layer_mode, start_layer
 from .physics.forward import surface_geometry, surface_mode, validate_layer_arguments
 from .physics.fresnel import fresnel_reflectance
 from .physics.phase import normalise_on_quadrature, phase_fourier_modes
@@ -180,9 +180,12 @@ def _build_g_slice(instrument, settings, g):
     p_trans = phase_fourier_modes(mu, mu, g, max_modes, reflection=False)
     p_refl, p_trans = normalise_on_quadrature(p_refl, p_trans, weight)
     kinds = [ch.kind for ch in instrument.channels]
+    if all(kind == "hemispherical" for kind in kinds):
+        max_modes = 1  # hemispherical reflectance sees only the azimuthal average
     black = np.zeros((n_a, n_tau + 2, K))
     quiet = 0
     for m in range(max_modes):
+        start = settings.start_thickness if m == 0 else max(settings.start_thickness, START_THICKNESS_HIGHER_MODES)
         R_all = np.empty((n_a, n_tau + 2, mu.size, mu.size))
         T_all = np.empty_like(R_all)
         e_all = np.empty((n_a, n_tau + 2, mu.size))
@@ -190,7 +193,7 @@ def _build_g_slice(instrument, settings, g):
                                                             p_refl[m], p_trans[m])
         for p in range(P):
             base = taus[p]
-            k0 = int(max(0, np.ceil(np.log2(base / settings.start_thickness))))
+            k0 = int(max(0, np.ceil(np.log2(base / start))))
             R, T, e = start_layer(mu, c, albedo, np.full(n_a, base / 2.0**k0), p_refl[m], p_trans[m])
             for _ in range(k0):
                 R, T, e = double(R, T, e, c)
@@ -199,7 +202,7 @@ def _build_g_slice(instrument, settings, g):
                     R, T, e = double(R, T, e, c)
                 R_all[:, 1 + j], T_all[:, 1 + j], e_all[:, 1 + j] = R, T, e
         R_all[:, -1], T_all[:, -1], e_all[:, -1] = layer_mode(mu, weight, a, np.full(n_a, np.inf),
-                                                              p_refl[m], p_trans[m], settings.start_thickness)
+                                                              p_refl[m], p_trans[m], start)
         flat = (n_a * (n_tau + 2), mu.size)
         mode = surface_mode(geometry, R_all.reshape(flat + (mu.size,)), T_all.reshape(flat + (mu.size,)),
                             e_all.reshape(flat), m == 0)
@@ -224,9 +227,10 @@ def _build_g_slice(instrument, settings, g):
                     factor = np.pi if kind == "reflectance_factor" else 1.0
                     t_up[..., k] = factor * mode["t_up"].reshape(n_a, n_tau + 2, -1)[..., index_out[k]]
             r_up = mode["r_up"].reshape(n_a, n_tau + 2)
-            reference = np.abs(black).max()
         else:
-            quiet = quiet + 1 if np.abs(contribution).max() < MODE_TOLERANCE * reference else 0
+            # every tabulated value, dark ones included, must have converged
+            small = (np.abs(contribution) <= MODE_TOLERANCE * np.abs(black)).all()
+            quiet = quiet + 1 if small else 0
             if quiet == 2:
                 break
     leading = albedo[:, None] * -np.expm1(-np.concatenate([[TAU_ZERO_EVAL], taus, [np.inf]]))[None, :]

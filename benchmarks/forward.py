@@ -36,7 +36,7 @@ TAU_STRIDE = 8
 IADPYTHON_SUBSET = 48
 #: bayespig quadratures timed: the default (converged far below 1e-4) and the smallest
 #: that still reaches 1e-4, for the comparison "at equal accuracy".
-BAYESPIG_POINTS = (DEFAULT_QUADRATURE_POINTS, 6)
+BAYESPIG_POINTS = (DEFAULT_QUADRATURE_POINTS, 10)
 #: Reference quadrature for the accuracy column (bayespig: points per interval).
 ACCURACY_POINTS = 32
 ACCURACY_SUBSET = 24

@@ -60,10 +60,10 @@ def random_parameters(rng, size, g_range=None):
     tau[rng.random(size) < 0.25] = np.inf
     r_s = rng.uniform(0.0, 1.0, size)
     if g_range is None:
-        return dict(a=a, tau=tau, r_s=r_s)
+        return {"a": a, "tau": tau, "r_s": r_s}
     # few distinct g values: the direct solver pays per distinct g
     g = np.repeat(rng.uniform(*g_range, size // G_GROUP_SIZE), G_GROUP_SIZE)
-    return dict(a=a, tau=tau, r_s=r_s, g=g)
+    return {"a": a, "tau": tau, "r_s": r_s, "g": g}
 
 
 def max_relative_error(table, parameters):
@@ -83,67 +83,75 @@ def load_average():
     return "n/a" if not hasattr(os, "getloadavg") else " ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
+def line(label, text):
+    print(f"{label:<42} {text}")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--skip-g", action="store_true", help="skip the (slow) table with a g axis")
     args = parser.parse_args(argv)
     rng = np.random.default_rng(SEED)
-    print(f"bayespig {bayespig.__version__}, numpy {np.__version__}, Python {platform.python_version()}, "
-          f"{os.cpu_count()} cores; load average at start {load_average()}")
-    print(f"instrument {INSTRUMENT!r} ({len(bayespig.get_instrument(INSTRUMENT))} channels), n = 1.45")
+    n_channels = len(bayespig.get_instrument(INSTRUMENT))
+    print(f"bayespig {bayespig.__version__}, numpy {np.__version__}, "
+          f"Python {platform.python_version()}, {os.cpu_count()} cores")
+    print(f"load average at start: {load_average()}")
+    print(f"instrument {INSTRUMENT!r} ({n_channels} channels), n = 1.45")
     with tempfile.TemporaryDirectory(prefix="bayespig-bench-") as cache:
         cache = Path(cache)
         start = time.perf_counter()
         table = load_table(INSTRUMENT, cache_dir=cache, progress=False)
-        build_iso = time.perf_counter() - start
-        print(f"build, isotropic table:        {build_iso:8.2f} s  (goal <= 10 s; includes writing the cache)")
+        line("build, isotropic table:", f"{time.perf_counter() - start:8.2f} s   (goal <= 10 s; "
+             "includes writing the cache)")
         load_times = []
         for _ in range(LOAD_REPEATS):
             start = time.perf_counter()
             load_table(INSTRUMENT, cache_dir=cache, progress=False)
             load_times.append(time.perf_counter() - start)
         size_mb = sum(p.stat().st_size for p in cache.glob("*.npz")) / 1e6
-        print(f"load from cache:               {np.median(load_times):8.3f} s  (median of {LOAD_REPEATS}, "
-              f"min {min(load_times):.3f} s; goal <= 0.2 s; file {size_mb:.1f} MB)")
+        line("load from cache:", f"{np.median(load_times):8.3f} s   (goal <= 0.2 s; median of "
+             f"{LOAD_REPEATS}; file {size_mb:.1f} MB)")
 
         for size in (16, 10_000):
             rate, seconds = throughput(table, rng, size)
-            print(f"throughput, {size:>6} sets/call: {rate:10.3g} channel values/s  ({seconds * 1e3:.3f} ms/call)")
+            line(f"throughput, {size} sets per call:",
+                 f"{rate:10.3g} channel values/s   ({seconds * 1e3:.2f} ms per call)")
 
         # one likelihood-sized evaluation: one (a, tau) on a black and on a white substrate
-        one = dict(a=0.05, tau=2.0, r_s=np.array([0.01, 0.95]))
+        one = {"a": 0.05, "tau": 2.0, "r_s": np.array([0.01, 0.95])}
         t_table = best_time(lambda: table(**one))
         t_direct = best_time(lambda: predict(INSTRUMENT, **one), min_total=2.0)
-        shape = table(**one).shape
-        print(f"likelihood-sized call {shape}:   table {t_table * 1e6:8.1f} us, direct solver "
-              f"{t_direct * 1e3:8.2f} ms, ratio {t_direct / t_table:8.0f}x  (goal >= 1000x)")
+        shape = "x".join(str(n) for n in table(**one).shape)
+        line(f"likelihood-sized evaluation ({shape}):",
+             f"table {t_table * 1e6:.0f} us, direct solver {t_direct * 1e3:.1f} ms: "
+             f"ratio {t_direct / t_table:.0f}x   (goal >= 1000x)")
         # the same evaluation for a whole ensemble in one call (emcee's vectorize=True)
         a, tau = rng.uniform(0.01, 0.5, (WALKERS, 1)), rng.uniform(0.5, 20.0, (WALKERS, 1))
         t_ensemble = best_time(lambda: table(a=a, tau=tau, r_s=one["r_s"])) / WALKERS
-        print(f"  per likelihood, {WALKERS} walkers per call: table {t_ensemble * 1e6:8.1f} us, "
-              f"ratio {t_direct / t_ensemble:8.0f}x")
+        line(f"  the same, {WALKERS} walkers in one call:",
+             f"table {t_ensemble * 1e6:.0f} us per walker: ratio {t_direct / t_ensemble:.0f}x")
 
         error = max_relative_error(table, random_parameters(rng, ACCURACY_POINTS))
-        print(f"max relative interpolation error, isotropic, {ACCURACY_POINTS} random points: {error:.2e}"
-              "  (goal <= 2e-4)")
+        line(f"max relative error, {ACCURACY_POINTS} random points:",
+             f"{error:.2e}   (goal <= 2e-4)")
 
         if not args.skip_g:
             start = time.perf_counter()
             table_g = load_table(INSTRUMENT, g="free", cache_dir=cache, progress=False)
             build_g = time.perf_counter() - start
-            verdict = "meets" if build_g <= 60 else "MISSES"
-            print(f"build, table with g axis {table_g.settings.g_range}, {table_g.settings.n_g} g nodes: "
-                  f"{build_g:8.1f} s  ({verdict} the goal <= 60 s)")
+            settings = table_g.settings
+            line(f"build, g table (g in {settings.g_range}, {settings.n_g} nodes):",
+                 f"{build_g:8.1f} s   ({'meets' if build_g <= 60 else 'MISSES'} the goal <= 60 s)")
             start = time.perf_counter()
             load_table(INSTRUMENT, g="free", cache_dir=cache, progress=False)
-            print(f"load from cache, g table:      {time.perf_counter() - start:8.3f} s")
-            rate, seconds = throughput_g(table_g, rng)
-            print(f"throughput, g table, 10000 sets/call: {rate:10.3g} channel values/s")
-            parameters = random_parameters(rng, G_GROUPS * G_GROUP_SIZE, table_g.settings.g_range)
-            error = max_relative_error(table_g, parameters)
-            print(f"max relative interpolation error, g table, {G_GROUPS * G_GROUP_SIZE} random points "
-                  f"({G_GROUPS} values of g): {error:.2e}  (goal <= 2e-4)")
-    print(f"load average at end {load_average()}")
+            line("load from cache, g table:", f"{time.perf_counter() - start:8.3f} s")
+            rate, _ = throughput_g(table_g, rng)
+            line("throughput, g table, 10000 sets per call:", f"{rate:10.3g} channel values/s")
+            n_points = G_GROUPS * G_GROUP_SIZE
+            error = max_relative_error(table_g, random_parameters(rng, n_points, settings.g_range))
+            line(f"max relative error, g table, {n_points} points:",
+                 f"{error:.2e}   (goal <= 2e-4; {G_GROUPS} values of g)")
+    print(f"load average at end: {load_average()}")
     return 0
 
 

@@ -32,3 +32,26 @@ def test_unknown_instrument_is_a_clear_error(tmp_path, capsys):
                  "--out", str(tmp_path / "x.csv")]) == 2
     assert "multi-angle-45" in capsys.readouterr().err
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_robustness_grid_prints_every_case_and_writes_json(tmp_path, capsys):
+    """Method 1's tau error is eps (paper section 4.1), here through the command line."""
+    import json
+
+    out = tmp_path / "cases.json"
+    assert main(["robustness", "--method", "1,4", "--a0", "0.1", "--tau0", "0.5", "--n-repeat", "400",
+                 "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "method1" in printed and "method4" in printed
+    records = {r["method"]: r for r in json.loads(out.read_text())}
+    assert set(records) == {"method1", "method4"}
+    # sample sd of -log(1 + eps xi) over 400 replicates: standard error ~ eps / sqrt(2 * 400)
+    eps, n = 0.05, 400
+    assert abs(records["method1"]["tau_rms"] - eps) < 5 * eps / np.sqrt(2 * n)
+
+
+def test_robustness_rejects_unknown_methods_and_bad_grids(tmp_path, capsys):
+    assert main(["robustness", "--method", "5"]) == 2
+    assert "unknown method '5'" in capsys.readouterr().err
+    assert main(["robustness", "--a0", "0.1,x"]) == 2
+    assert "--a0" in capsys.readouterr().err

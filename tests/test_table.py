@@ -90,8 +90,9 @@ DEFAULT_TAU_MIN = TableSettings().tau_nodes[0]
 #: A small user-defined instrument for the g-axis and cache tests: one geometry on each
 #: side of the specular plane, so azimuthal modes enter with both signs.
 SMALL_INSTRUMENT = ("45as15", "45as110")
-COARSE_G_SETTINGS = TableSettings(g_range=(-0.3, 0.3), n_g=4, n_a=12, log2_tau_min=-4, log2_tau_max=4,
-                                  per_octave=2)
+COARSE_G_SETTINGS = TableSettings(
+    g_range=(-0.3, 0.3), n_g=4, n_a=12, log2_tau_min=-4, log2_tau_max=4, per_octave=2
+)
 #: A quick isotropic table for the cache tests.
 SMALL_SETTINGS = TableSettings(n_a=12, log2_tau_min=-4, log2_tau_max=4, per_octave=2)
 
@@ -114,25 +115,37 @@ def domain_points(rng, size, tau_max=100.0):
     the first tau node, log-uniform from 1e-5, and large), a quarter opaque; r_s in [0, 1]
     with exact 0 and 1.
     """
-    a = mixture(rng, size, [
-        (0.4, lambda n: rng.uniform(0.0, 1.0, n)),
-        (0.2, lambda n: 10.0 ** rng.uniform(-7.0, -1.0, n)),
-        (0.15, lambda n: 1.0 - 10.0 ** rng.uniform(-6.0, -1.0, n)),
-        (0.25, lambda n: rng.uniform(0.0, 1.0, n) ** 2),
-    ])
-    tau = mixture(rng, size, [
-        (0.3, lambda n: rng.uniform(0.0, tau_max, n)),
-        (0.25, lambda n: np.exp(rng.uniform(np.log(1e-5), np.log(tau_max), n))),
-        (0.1, lambda n: rng.uniform(0.0, DEFAULT_TAU_MIN, n)),
-        (0.1, lambda n: rng.uniform(0.5 * tau_max, tau_max, n)),
-        (0.25, lambda n: np.full(n, np.inf)),
-    ])
-    r_s = mixture(rng, size, [
-        (0.7, lambda n: rng.uniform(0.0, 1.0, n)),
-        (0.1, lambda n: np.zeros(n)),
-        (0.05, lambda n: np.ones(n)),
-        (0.15, lambda n: 1.0 - 10.0 ** rng.uniform(-4.0, -1.0, n)),
-    ])
+    a = mixture(
+        rng,
+        size,
+        [
+            (0.4, lambda n: rng.uniform(0.0, 1.0, n)),
+            (0.2, lambda n: 10.0 ** rng.uniform(-7.0, -1.0, n)),
+            (0.15, lambda n: 1.0 - 10.0 ** rng.uniform(-6.0, -1.0, n)),
+            (0.25, lambda n: rng.uniform(0.0, 1.0, n) ** 2),
+        ],
+    )
+    tau = mixture(
+        rng,
+        size,
+        [
+            (0.3, lambda n: rng.uniform(0.0, tau_max, n)),
+            (0.25, lambda n: np.exp(rng.uniform(np.log(1e-5), np.log(tau_max), n))),
+            (0.1, lambda n: rng.uniform(0.0, DEFAULT_TAU_MIN, n)),
+            (0.1, lambda n: rng.uniform(0.5 * tau_max, tau_max, n)),
+            (0.25, lambda n: np.full(n, np.inf)),
+        ],
+    )
+    r_s = mixture(
+        rng,
+        size,
+        [
+            (0.7, lambda n: rng.uniform(0.0, 1.0, n)),
+            (0.1, lambda n: np.zeros(n)),
+            (0.05, lambda n: np.ones(n)),
+            (0.15, lambda n: 1.0 - 10.0 ** rng.uniform(-4.0, -1.0, n)),
+        ],
+    )
     return a, tau, r_s
 
 
@@ -158,7 +171,9 @@ def union_instrument():
 def solve_with_substrate_inside(instrument, *, a, tau, g, r_s):
     """Direct solve with the Lambertian substrate added as a layer (not through eq. 3)."""
     theta_in, theta_out, _, _ = channel_directions(instrument)
-    terms = surface_terms(theta_in, theta_out, a=a, tau=tau, g=g, n=instrument.n, included_substrate=r_s)
+    terms = surface_terms(
+        theta_in, theta_out, a=a, tau=tau, g=g, n=instrument.n, included_substrate=r_s
+    )
     return channel_values(instrument, terms, np.zeros_like(r_s))
 
 
@@ -172,7 +187,9 @@ def node_grid(settings, a_index, tau_index, r_s_values, g=0.0):
 
 def elasticity_error(derivative, reference, value, parameter):
     """|d log x / d log p| mismatch, the form Fisher information uses."""
-    return np.abs((derivative - reference) * parameter[..., None]) / np.maximum(np.abs(value), NEGLIGIBLE_VALUE)
+    return np.abs((derivative - reference) * parameter[..., None]) / np.maximum(
+        np.abs(value), NEGLIGIBLE_VALUE
+    )
 
 
 def _tripwire(path):
@@ -214,8 +231,13 @@ def reference():
 @pytest.fixture(scope="session")
 def coarse_g_table(cache_dir):
     """A user-defined two-geometry instrument with a coarse g axis (default process pool)."""
-    return load_table(list(SMALL_INSTRUMENT), g="free", settings=COARSE_G_SETTINGS, cache_dir=cache_dir,
-                      progress=False)
+    return load_table(
+        list(SMALL_INSTRUMENT),
+        g="free",
+        settings=COARSE_G_SETTINGS,
+        cache_dir=cache_dir,
+        progress=False,
+    )
 
 
 # --- accuracy -------------------------------------------------------------------------------
@@ -235,7 +257,9 @@ def test_one_reference_solve_equals_per_instrument_solves(reference):
     """The shared reference solve gives each instrument what its own solve gives."""
     rows = slice(0, 12)
     for name in BUILT_IN:
-        alone = predict(name, a=reference["a"][rows], tau=reference["tau"][rows], r_s=reference["r_s"][rows])
+        alone = predict(
+            name, a=reference["a"][rows], tau=reference["tau"][rows], r_s=reference["r_s"][rows]
+        )
         shared = reference["values"][rows, reference["columns"][name]]
         np.testing.assert_allclose(alone, shared, rtol=SAME_SOLVE_REL_TOL, atol=0)
 
@@ -261,12 +285,16 @@ def test_monotone_towards_the_opaque_limit_and_in_a(tables, name):
     values = table(a=a[:, None], tau=tau[None, :], r_s=0.0)  # (a, tau, channel)
     assert np.isfinite(values).all() and (values > 0).all()
     slack = MONOTONE_SLACK * values
-    assert (np.diff(values, axis=1) >= -slack[:, 1:]).all(), "not increasing with tau towards the opaque limit"
+    assert (np.diff(values, axis=1) >= -slack[:, 1:]).all(), (
+        "not increasing with tau towards the opaque limit"
+    )
     assert (np.diff(values, axis=0) <= slack[1:]).all(), "not decreasing with a"
     # the gap to the opaque value closes faster the more the pigment absorbs
     gap = values[:, -1] - values[:, -2]
     assert (np.diff(gap, axis=0) <= slack[1:, -1]).all()
-    assert (gap >= -slack[:, -1]).all() and (gap[:3] > 0).all()  # a -> 0 at tau = 100 is not yet opaque
+    assert (gap >= -slack[:, -1]).all() and (
+        gap[:3] > 0
+    ).all()  # a -> 0 at tau = 100 is not yet opaque
 
 
 @pytest.mark.parametrize("tau", [0.0, 1e-4, 0.3, 3.0, 60.0, np.inf])
@@ -279,9 +307,12 @@ def test_white_non_absorbing_film_reflects_everything(tables, tau):
 def test_grid_nodes_are_exact_for_any_substrate(tables):
     """At (a, tau) nodes, every r_s equals a solve with the substrate inside the layer stack."""
     settings = TableSettings()
-    a, tau, r_s = node_grid(settings, a_index=(0, 1, 5, 17, 30, settings.n_a - 1),
-                            tau_index=(0, 13, 40, len(settings.tau_nodes) - 1),
-                            r_s_values=np.array([0.0, 0.3, 0.9, 1.0]))
+    a, tau, r_s = node_grid(
+        settings,
+        a_index=(0, 1, 5, 17, 30, settings.n_a - 1),
+        tau_index=(0, 13, 40, len(settings.tau_nodes) - 1),
+        r_s_values=np.array([0.0, 0.3, 0.9, 1.0]),
+    )
     union, columns = union_instrument()
     direct = solve_with_substrate_inside(union, a=a, tau=tau, g=0.0, r_s=r_s)
     for name in BUILT_IN:
@@ -294,8 +325,12 @@ def test_grid_nodes_are_exact_for_any_substrate(tables):
 def test_g_table_nodes_are_exact(coarse_g_table):
     settings = COARSE_G_SETTINGS
     instrument = get_instrument(list(SMALL_INSTRUMENT))
-    a, tau, r_s = node_grid(settings, a_index=(0, 3, 7, settings.n_a - 1), tau_index=(0, 9, 16),
-                            r_s_values=np.array([0.0, 0.6, 1.0]))
+    a, tau, r_s = node_grid(
+        settings,
+        a_index=(0, 3, 7, settings.n_a - 1),
+        tau_index=(0, 9, 16),
+        r_s_values=np.array([0.0, 0.6, 1.0]),
+    )
     for g in settings.g_nodes:
         direct = solve_with_substrate_inside(instrument, a=a, tau=tau, g=float(g), r_s=r_s)
         error = relative_error(coarse_g_table(a=a, tau=tau, g=g, r_s=r_s), direct)
@@ -309,39 +344,52 @@ def test_g_table_interpolates_log_values_by_the_cubic_through_the_g_nodes(coarse
     a, tau, _ = domain_points(rng, 40, tau_max=16.0)
     a = np.minimum(a, 0.99)
     g_nodes = COARSE_G_SETTINGS.g_nodes
-    at_nodes = np.log(coarse_g_table(a=a, tau=tau, g=g_nodes[:, None], r_s=0.0))  # (g, point, channel)
+    at_nodes = np.log(
+        coarse_g_table(a=a, tau=tau, g=g_nodes[:, None], r_s=0.0)
+    )  # (g, point, channel)
     for g in rng.uniform(*COARSE_G_SETTINGS.g_range, 5):
         expected = np.empty(at_nodes.shape[1:])
         for index in np.ndindex(expected.shape):
             cubic = np.polynomial.Polynomial.fit(g_nodes, at_nodes[(slice(None),) + index], 3)
             expected[index] = cubic(g)
-        np.testing.assert_allclose(np.log(coarse_g_table(a=a, tau=tau, g=g, r_s=0.0)), expected,
-                                   rtol=0, atol=LOG_IDENTITY_ABS_TOL)
+        np.testing.assert_allclose(
+            np.log(coarse_g_table(a=a, tau=tau, g=g, r_s=0.0)),
+            expected,
+            rtol=0,
+            atol=LOG_IDENTITY_ABS_TOL,
+        )
 
 
 def test_g_table_interpolates_between_g_nodes(coarse_g_table):
     rng = np.random.default_rng(7)
     a, tau, r_s = domain_points(rng, 60, tau_max=16.0)
     g = np.repeat(rng.uniform(*COARSE_G_SETTINGS.g_range, 6), 10)
-    error = relative_error(coarse_g_table(a=a, tau=tau, g=g, r_s=r_s),
-                           predict(list(SMALL_INSTRUMENT), a=a, tau=tau, g=g, r_s=r_s))
+    error = relative_error(
+        coarse_g_table(a=a, tau=tau, g=g, r_s=r_s),
+        predict(list(SMALL_INSTRUMENT), a=a, tau=tau, g=g, r_s=r_s),
+    )
     assert error.max() <= COARSE_G_TABLE_REL_TOL
 
 
 def test_isotropic_slice_of_a_g_table_is_the_isotropic_table(coarse_g_table):
     """g = 0 is not a node of the coarse g axis: the g table interpolates to the isotropic one."""
-    isotropic = build_table(list(SMALL_INSTRUMENT), dataclasses.replace(COARSE_G_SETTINGS, g_range=None),
-                            progress=False)
+    isotropic = build_table(
+        list(SMALL_INSTRUMENT), dataclasses.replace(COARSE_G_SETTINGS, g_range=None), progress=False
+    )
     rng = np.random.default_rng(8)
     a, tau, r_s = domain_points(rng, 200, tau_max=16.0)
-    error = relative_error(coarse_g_table(a=a, tau=tau, g=0.0, r_s=r_s), isotropic(a=a, tau=tau, r_s=r_s))
+    error = relative_error(
+        coarse_g_table(a=a, tau=tau, g=0.0, r_s=r_s), isotropic(a=a, tau=tau, r_s=r_s)
+    )
     assert error.max() <= COARSE_G_TABLE_REL_TOL
 
 
 def test_g_table_build_is_deterministic_across_executors(coarse_g_table):
     """Process pool (default) and threads give bit-identical arrays."""
     with ThreadPoolExecutor(max_workers=2) as executor:
-        again = build_table(list(SMALL_INSTRUMENT), COARSE_G_SETTINGS, executor=executor, progress=False)
+        again = build_table(
+            list(SMALL_INSTRUMENT), COARSE_G_SETTINGS, executor=executor, progress=False
+        )
     assert again.key == coarse_g_table.key
     for key, array in coarse_g_table.arrays.items():
         assert array.tobytes() == again.arrays[key].tobytes(), key
@@ -352,7 +400,7 @@ def interior_points(rng, size):
     a = rng.uniform(0.02, 0.9, size)
     tau = np.exp(rng.uniform(np.log(0.05), np.log(30.0), size))
     tau[: size // 6] = rng.uniform(0.1, 0.9, size // 6) * DEFAULT_TAU_MIN  # linear blend to tau = 0
-    tau[-(size // 6):] = np.inf
+    tau[-(size // 6) :] = np.inf
     r_s = rng.uniform(0.0, 1.0, size)
     return a, tau, r_s
 
@@ -373,12 +421,17 @@ def test_gradient_matches_differences_of_the_interpolant(tables, name):
     np.testing.assert_array_equal(value, table(a=a, tau=tau, r_s=r_s))
     finite = np.isfinite(tau)
     params = {"a": a, "tau": np.where(finite, tau, 1.0), "r_s": r_s}
-    fd_a = central_difference(lambda **p: table(a=p["a"], tau=tau, r_s=p["r_s"]), params, "a",
-                              FD_STEP_INTERPOLANT)
+    fd_a = central_difference(
+        lambda **p: table(a=p["a"], tau=tau, r_s=p["r_s"]), params, "a", FD_STEP_INTERPOLANT
+    )
     assert elasticity_error(d_a, fd_a, value, a).max() <= GRADIENT_INTERPOLANT_TOL
-    fd_tau = central_difference(table, {"a": a[finite], "tau": tau[finite], "r_s": r_s[finite]}, "tau",
-                                FD_STEP_INTERPOLANT)
-    assert elasticity_error(d_tau[finite], fd_tau, value[finite], tau[finite]).max() <= GRADIENT_INTERPOLANT_TOL
+    fd_tau = central_difference(
+        table, {"a": a[finite], "tau": tau[finite], "r_s": r_s[finite]}, "tau", FD_STEP_INTERPOLANT
+    )
+    assert (
+        elasticity_error(d_tau[finite], fd_tau, value[finite], tau[finite]).max()
+        <= GRADIENT_INTERPOLANT_TOL
+    )
     np.testing.assert_array_equal(d_tau[~finite], 0.0)  # opaque films do not depend on tau
     np.testing.assert_array_equal(d_g, np.zeros_like(d_g))  # no g axis: g = 0 throughout
 
@@ -389,13 +442,20 @@ def test_gradient_matches_differences_of_the_direct_solver(tables, name):
     rng = np.random.default_rng(12)
     a, tau, r_s = interior_points(rng, 18)
     value, d_a, d_tau, _ = table.evaluate(a=a, tau=tau, r_s=r_s, gradient=True)
-    solver = lambda **p: predict(name, **p)  # noqa: E731
+
+    def solver(**parameters):
+        return predict(name, **parameters)
+
     fd_a = central_difference(solver, {"a": a, "tau": tau, "r_s": r_s}, "a", FD_STEP_SOLVER)
     assert elasticity_error(d_a, fd_a, value, a).max() <= GRADIENT_SOLVER_TOL
     finite = np.isfinite(tau)
-    fd_tau = central_difference(solver, {"a": a[finite], "tau": tau[finite], "r_s": r_s[finite]}, "tau",
-                                FD_STEP_SOLVER)
-    assert elasticity_error(d_tau[finite], fd_tau, value[finite], tau[finite]).max() <= GRADIENT_SOLVER_TOL
+    fd_tau = central_difference(
+        solver, {"a": a[finite], "tau": tau[finite], "r_s": r_s[finite]}, "tau", FD_STEP_SOLVER
+    )
+    assert (
+        elasticity_error(d_tau[finite], fd_tau, value[finite], tau[finite]).max()
+        <= GRADIENT_SOLVER_TOL
+    )
 
 
 def test_g_gradient_matches_differences_of_the_interpolant(coarse_g_table):
@@ -403,13 +463,20 @@ def test_g_gradient_matches_differences_of_the_interpolant(coarse_g_table):
     a, tau, r_s = interior_points(rng, 24)
     tau = np.minimum(tau, 15.0)
     g = rng.uniform(-0.25, 0.25, a.size)
-    value, d_a, d_tau, d_g = coarse_g_table.evaluate(a=a, tau=tau, g=g, r_s=r_s, gradient=True)
+    value, d_a, _, d_g = coarse_g_table.evaluate(a=a, tau=tau, g=g, r_s=r_s, gradient=True)
     h = FD_STEP_INTERPOLANT
-    fd_g = (coarse_g_table(a=a, tau=tau, g=g + h, r_s=r_s) - coarse_g_table(a=a, tau=tau, g=g - h, r_s=r_s)) / (2 * h)
+    fd_g = (
+        coarse_g_table(a=a, tau=tau, g=g + h, r_s=r_s)
+        - coarse_g_table(a=a, tau=tau, g=g - h, r_s=r_s)
+    ) / (2 * h)
     # g is not a scale parameter: compare d log x / dg directly
     assert (np.abs(d_g - fd_g) / np.abs(value)).max() <= GRADIENT_INTERPOLANT_TOL
-    fd_a = central_difference(lambda **p: coarse_g_table(a=p["a"], tau=tau, g=g, r_s=r_s), {"a": a}, "a",
-                              FD_STEP_INTERPOLANT)
+    fd_a = central_difference(
+        lambda **p: coarse_g_table(a=p["a"], tau=tau, g=g, r_s=r_s),
+        {"a": a},
+        "a",
+        FD_STEP_INTERPOLANT,
+    )
     assert elasticity_error(d_a, fd_a, value, a).max() <= GRADIENT_INTERPOLANT_TOL
 
 
@@ -441,9 +508,13 @@ def test_hemispherical_and_45_0_channels_match_the_forward_functions(tables):
     r_s = 0.5
     for name, specular in (("8d-sci", "included"), ("8d-sce", "excluded")):
         expected = bayespig.hemispherical_reflectance(8.0, a=a, tau=tau, r_s=r_s, specular=specular)
-        np.testing.assert_allclose(tables[name](a=a, tau=tau, r_s=r_s)[..., 0], expected, rtol=BROADCAST_REL_TOL)
+        np.testing.assert_allclose(
+            tables[name](a=a, tau=tau, r_s=r_s)[..., 0], expected, rtol=BROADCAST_REL_TOL
+        )
     expected = np.pi * bayespig.brdf(45.0, 0.0, 180.0, a=a, tau=tau, r_s=r_s)
-    np.testing.assert_allclose(tables["45-0"](a=a, tau=tau, r_s=r_s)[..., 0], expected, rtol=BROADCAST_REL_TOL)
+    np.testing.assert_allclose(
+        tables["45-0"](a=a, tau=tau, r_s=r_s)[..., 0], expected, rtol=BROADCAST_REL_TOL
+    )
 
 
 # --- bad input ------------------------------------------------------------------------------
@@ -476,11 +547,16 @@ def test_g_outside_the_tables_range(coarse_g_table):
 
 
 def test_bad_instrument_and_options(cache_dir):
-    with pytest.raises(ValueError, match="unknown instrument 'no-such'; built-in instruments: " + ", ".join(BUILT_IN)):
+    with pytest.raises(
+        ValueError,
+        match="unknown instrument 'no-such'; built-in instruments: " + ", ".join(BUILT_IN),
+    ):
         load_table("no-such", cache_dir=cache_dir)
     with pytest.raises(ValueError, match="g must be 'isotropic' or 'free'"):
         load_table("8d-sci", g="anisotropic", cache_dir=cache_dir)
-    with pytest.raises(ValueError, match=r"n \(binder refractive index\) must be a finite number >= 1"):
+    with pytest.raises(
+        ValueError, match=r"n \(binder refractive index\) must be a finite number >= 1"
+    ):
         load_table("8d-sci", n=0.9, cache_dir=cache_dir)
     assert not list(cache_dir.glob("*.tmp")), "a failed call left a partial file"
 
@@ -489,7 +565,9 @@ def test_bad_instrument_and_options(cache_dir):
 @pytest.fixture
 def small_cache(tmp_path):
     """A cache holding one small isotropic table; returns (table, path)."""
-    table = load_table(list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, cache_dir=tmp_path, progress=False)
+    table = load_table(
+        list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, cache_dir=tmp_path, progress=False
+    )
     path = table_path(table.key, tmp_path)
     assert path.is_file()
     return table, path
@@ -508,13 +586,17 @@ def test_cache_file_loads_back_identical(small_cache):
     assert isinstance(again, LookupTable) and again.key == table.key
     assert_same_arrays(table.arrays, again.arrays)
     assert not list(path.parent.glob("*.tmp"))  # atomic write left nothing behind
-    cached = load_table(list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, cache_dir=path.parent, progress=False)
+    cached = load_table(
+        list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, cache_dir=path.parent, progress=False
+    )
     assert_same_arrays(table.arrays, cached.arrays)
 
 
 def test_build_is_deterministic(small_cache):
     table, _ = small_cache
-    assert_same_arrays(table.arrays, build_table(list(SMALL_INSTRUMENT), SMALL_SETTINGS, progress=False).arrays)
+    assert_same_arrays(
+        table.arrays, build_table(list(SMALL_INSTRUMENT), SMALL_SETTINGS, progress=False).arrays
+    )
 
 
 def _truncate(path):
@@ -525,7 +607,7 @@ def _truncate(path):
 def _flip_bytes(path):
     data = bytearray(path.read_bytes())
     middle = len(data) // 2
-    data[middle:middle + 16] = bytes(b ^ 0xFF for b in data[middle:middle + 16])
+    data[middle : middle + 16] = bytes(b ^ 0xFF for b in data[middle : middle + 16])
     path.write_bytes(bytes(data))
 
 
@@ -541,22 +623,32 @@ def _tamper_keeping_checksum(path):
 
 @pytest.mark.parametrize(
     "damage, message",
-    [(_truncate, "is unreadable"), (_flip_bytes, "is unreadable|is corrupt"),
-     (_tamper_keeping_checksum, r"is corrupt \(checksum mismatch\)")],
+    [
+        (_truncate, "is unreadable"),
+        (_flip_bytes, "is unreadable|is corrupt"),
+        (_tamper_keeping_checksum, r"is corrupt \(checksum mismatch\)"),
+    ],
 )
 def test_corrupt_cache_file_is_detected_and_rebuilt(small_cache, damage, message):
     table, path = small_cache
     damage(path)
     with pytest.raises(CacheError, match=message):
         read_table(path, list(SMALL_INSTRUMENT), SMALL_SETTINGS)
-    with pytest.warns(RuntimeWarning, match=f"cached table .*({message}).*; rebuilding it") as record:
-        rebuilt = load_table(list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, cache_dir=path.parent,
-                             progress=False)
+    with pytest.warns(
+        RuntimeWarning, match=f"cached table .*({message}).*; rebuilding it"
+    ) as record:
+        rebuilt = load_table(
+            list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, cache_dir=path.parent, progress=False
+        )
     assert len(record) == 1 and "\n" not in str(record[0].message)
     assert_same_arrays(table.arrays, rebuilt.arrays)
     # the rebuilt file is whole again: loading it warns no more (warnings are errors here)
-    assert_same_arrays(table.arrays, read_table(path, list(SMALL_INSTRUMENT), SMALL_SETTINGS).arrays)
-    load_table(list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, cache_dir=path.parent, progress=False)
+    assert_same_arrays(
+        table.arrays, read_table(path, list(SMALL_INSTRUMENT), SMALL_SETTINGS).arrays
+    )
+    load_table(
+        list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, cache_dir=path.parent, progress=False
+    )
 
 
 def test_cache_built_with_other_settings_is_detected(small_cache):
@@ -566,9 +658,12 @@ def test_cache_built_with_other_settings_is_detected(small_cache):
     save_table(other, path)  # a well-formed file under the wrong name
     with pytest.raises(CacheError, match="was built with other settings"):
         read_table(path, list(SMALL_INSTRUMENT), SMALL_SETTINGS)
-    with pytest.warns(RuntimeWarning, match="was built with other settings.*; rebuilding it") as record:
-        rebuilt = load_table(list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, cache_dir=path.parent,
-                             progress=False)
+    with pytest.warns(
+        RuntimeWarning, match="was built with other settings.*; rebuilding it"
+    ) as record:
+        rebuilt = load_table(
+            list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, cache_dir=path.parent, progress=False
+        )
     assert len(record) == 1
     assert_same_arrays(table.arrays, rebuilt.arrays)
 
@@ -576,7 +671,11 @@ def test_cache_built_with_other_settings_is_detected(small_cache):
 def test_cache_files_are_never_unpickled(small_cache, tmp_path):
     table, path = small_cache
     marker = tmp_path / "marker"
-    payload = dict(table.arrays, __key__=np.array(table.key), log_q=np.array([_PickleTrap(marker)], dtype=object))
+    payload = dict(
+        table.arrays,
+        __key__=np.array(table.key),
+        log_q=np.array([_PickleTrap(marker)], dtype=object),
+    )
     with open(path, "wb") as handle:
         np.savez(handle, **payload)
     with pytest.raises(CacheError, match="is unreadable"):
@@ -590,13 +689,25 @@ def test_cache_files_are_never_unpickled(small_cache, tmp_path):
 def test_key_covers_every_setting_that_changes_the_numbers():
     instrument = get_instrument(list(SMALL_INSTRUMENT))
     base = table_key(instrument, SMALL_SETTINGS)
-    assert base == table_key(get_instrument(list(SMALL_INSTRUMENT)), TableSettings(**dataclasses.asdict(SMALL_SETTINGS)))
+    assert base == table_key(
+        get_instrument(list(SMALL_INSTRUMENT)), TableSettings(**dataclasses.asdict(SMALL_SETTINGS))
+    )
     changed = {
-        "n_a": 13, "a_stretch": 20.0, "log2_tau_min": -5, "log2_tau_max": 5, "per_octave": 3,
-        "g_range": (-0.3, 0.3), "n_g": 5, "n_points": 12, "start_thickness": 2.0**-20,
+        "n_a": 13,
+        "a_stretch": 20.0,
+        "log2_tau_min": -5,
+        "log2_tau_max": 5,
+        "per_octave": 3,
+        "g_range": (-0.3, 0.3),
+        "n_g": 5,
+        "n_points": 12,
+        "start_thickness": 2.0**-20,
     }
     assert set(changed) == {field.name for field in dataclasses.fields(TableSettings)}
-    keys = {table_key(instrument, dataclasses.replace(SMALL_SETTINGS, **{k: v})) for k, v in changed.items()}
+    keys = {
+        table_key(instrument, dataclasses.replace(SMALL_SETTINGS, **{k: v}))
+        for k, v in changed.items()
+    }
     keys.add(table_key(dataclasses.replace(instrument, n=1.5), SMALL_SETTINGS))
     keys.add(table_key(get_instrument(["45as15", "45as25"]), SMALL_SETTINGS))
     keys.add(table_key(get_instrument(list(reversed(SMALL_INSTRUMENT))), SMALL_SETTINGS))
@@ -662,7 +773,9 @@ def test_free_g_table_over_the_full_domain(cache_dir):
     g_values = rng.uniform(*table.settings.g_range, N_G_VALUES_SLOW)
     g_values[:2] = table.settings.g_range  # the edges of the g axis
     g = np.repeat(g_values, N_RANDOM_POINTS // N_G_VALUES_SLOW)
-    error = relative_error(table(a=a, tau=tau, g=g, r_s=r_s), predict("multi-angle-45", a=a, tau=tau, g=g, r_s=r_s))
+    error = relative_error(
+        table(a=a, tau=tau, g=g, r_s=r_s), predict("multi-angle-45", a=a, tau=tau, g=g, r_s=r_s)
+    )
     per_g = error.reshape(N_G_VALUES_SLOW, -1).max(axis=1)
     assert error.max() <= INTERPOLATION_REL_TOL, (
         f"max relative error {error.max():.2e}; worst g values "
@@ -673,7 +786,13 @@ def test_free_g_table_over_the_full_domain(cache_dir):
 @pytest.mark.slow
 def test_build_on_a_dask_cluster_is_identical(coarse_g_table):
     distributed = pytest.importorskip("distributed")
-    with distributed.Client(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as client:
-        again = build_table(list(SMALL_INSTRUMENT), COARSE_G_SETTINGS, executor=client.get_executor(),
-                            progress=False)
+    with distributed.Client(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as client:
+        again = build_table(
+            list(SMALL_INSTRUMENT),
+            COARSE_G_SETTINGS,
+            executor=client.get_executor(),
+            progress=False,
+        )
     assert_same_arrays(coarse_g_table.arrays, again.arrays)

@@ -1,0 +1,1 @@
+"""Sub-commands of the ``bayespig`` command, one module each (``add_*_parser`` and ``run_*``)."""
