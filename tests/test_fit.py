@@ -48,12 +48,9 @@ INSTRUMENT = "multi-angle-45"
 
 
 @pytest.fixture(scope="module", autouse=True)
-def table_cache(tmp_path_factory):
+def table_cache(private_table_cache):
     """Tables of this module are built into a temporary cache (the user's cache is untouched)."""
-    path = tmp_path_factory.mktemp("fit-table-cache")
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("BAYESPIG_CACHE", str(path))
-        yield path
+    return private_table_cache
 
 
 @pytest.fixture(scope="module")
