@@ -314,90 +314,34 @@ class ForwardModel:
 # fast path: one wavelength; interpolation stencils shared by the films of one table and group
 
 
-#: Cubic Lagrange weights on nodes 0, 1, 2, 3 as polynomials in t: ``w = [1, t, t^2, t^3] @ M``.
-_LAGRANGE_MATRIX = np.array([
-    [1.0, 0.0, 0.0, 0.0],
-    [-11.0 / 6.0, 3.0, -1.5, 1.0 / 3.0],
-    [1.0, -2.5, 2.0, -0.5],
-    [-1.0 / 6.0, 0.5, -0.5, 1.0 / 6.0],
-])
-_POWERS = np.arange(4.0)
-_OFFSETS = np.arange(4)
-
-
-def _lagrange_weights(x, x0, dx, n):
-    """Start index and cubic Lagrange weights on a uniform axis (the look-up table's stencil).
-
-    The stencil starts one node below ``x`` and is clamped to the axis, as in
-    :mod:`bayespig.table`, so that ``x`` beyond the end nodes extrapolates the
-    end stencil.
-    """
-    pos = (x - x0) / dx
-    start = np.floor(np.minimum(np.maximum(pos, 1.0), n - 3.0)).astype(np.intp) - 1
-    t = pos - start
-    return start, (t[:, None] ** _POWERS) @ _LAGRANGE_MATRIX
-
-
 class _StencilTable:
-    """A look-up table's arrays stacked for one gather per call.
+    """A look-up table's interpolation, shared by the films of one table and film group.
 
-    The table interpolates ``log q``, ``log D``, ``log U`` and ``R_up`` with the same
-    tensor-product stencil (:mod:`bayespig.table`); interpolation is linear, so
-    ``log D + log U`` is interpolated as one quantity and all of them come from one
-    gather of ``(2 K + 1)``-vectors. Rows are ``(g, a, tau)`` node triples; the opaque
-    slice (eq. 2) is a separate ``(g, a)`` array.
+    The table interpolates ``log q``, ``log D + log U`` and ``R_up`` from one stacked
+    array with one stencil gather per call (:meth:`bayespig.table.LookupTable.interpolate`,
+    the code path of the table itself, so the fast path follows every axis transform and
+    stencil of :class:`~bayespig.table.TableSettings`); this wrapper splits the result and
+    keeps what the likelihood needs per table (``tau_min``, the specular term).
     """
 
     def __init__(self, table):
-        settings = table.settings
-        arrays = table.arrays
-        log_q = arrays["log_q"]
-        self.n_g, self.n_a, self.n_tau_rows, self.n_channels = log_q.shape
-        stacked = np.concatenate([log_q, arrays["log_d"] + arrays["log_u"], arrays["r_up"][..., None]], axis=-1)
-        self.finite = np.ascontiguousarray(stacked.reshape(-1, stacked.shape[-1]))
-        self.opaque = np.ascontiguousarray(log_q[:, :, -1, :].reshape(-1, self.n_channels))
-        self.a_stretch = settings.a_stretch
-        self.asinh_stretch = np.arcsinh(settings.a_stretch)
-        v_nodes = settings.v_nodes
-        self.du = v_nodes[1] - v_nodes[0]
-        log_tau = np.log(settings.tau_nodes)
-        self.x0, self.dx, self.n_tau = log_tau[0], log_tau[1] - log_tau[0], log_tau.size
-        self.tau_min, self.tau_max = settings.tau_nodes[0], settings.tau_nodes[-1]
-        g_nodes = settings.g_nodes
-        self.g0 = g_nodes[0]
-        self.dg = g_nodes[1] - g_nodes[0] if g_nodes.size > 1 else 1.0
+        self.table = table
+        self.n_channels = table.n_channels
+        self.free_g = table.n_g > 1
+        self.tau_min, self.tau_max = table.tau_min, table.tau_max
         # an opaque film of a = 1 reflects only what the table adds for specular-included channels
         self.specular = table(a=1.0, tau=np.inf)
 
-    def _a_g_rows(self, a, g):
-        """Row offsets and weights of the (g, a) stencil, shapes (W, S) with S = 4 or 16."""
-        u = np.arcsinh(self.a_stretch * np.sqrt(a)) / self.asinh_stretch
-        su, wu = _lagrange_weights(u, 0.0, self.du, self.n_a)
-        rows = su[:, None] + _OFFSETS
-        if self.n_g == 1:
-            return rows, wu
-        if g is None:
-            g = np.zeros(a.shape)
-        sg, wg = _lagrange_weights(g, self.g0, self.dg, self.n_g)
-        rows = ((sg[:, None] + _OFFSETS) * self.n_a)[:, :, None] + rows[:, None, :]
-        weights = wg[:, :, None] * wu[:, None, :]
-        return rows.reshape(rows.shape[0], -1), weights.reshape(rows.shape[0], -1)
-
     def interpolate_finite(self, a, tau, g):
-        """``log q``, ``log D + log U`` (W, K each) and ``R_up`` (W,) at tau >= tau_min."""
-        rows, weights = self._a_g_rows(a, g)
-        sx, wx = _lagrange_weights(np.log(tau), self.x0, self.dx, self.n_tau)
-        index = (rows * self.n_tau_rows)[:, :, None] + (1 + sx[:, None] + _OFFSETS)[:, None, :]
-        weights = weights[:, :, None] * wx[:, None, :]
-        w = weights.shape[0]
-        values = np.matmul(weights.reshape(w, 1, -1), self.finite.take(index.reshape(w, -1), axis=0))[:, 0]
+        """``log q``, ``log D + log U`` (W, K each) and ``R_up`` (W,) at finite tau."""
+        terms = self.table.interpolate(a, tau, g if self.free_g else None)
         k = self.n_channels
-        return values[:, :k], values[:, k:2 * k], values[:, 2 * k]
+        return terms[:, :k], terms[:, k:2 * k], terms[:, 2 * k]
 
     def interpolate_opaque(self, a, g):
         """``log q`` of the opaque slice, (W, K)."""
-        rows, weights = self._a_g_rows(a, g)
-        return np.matmul(weights[:, None, :], self.opaque.take(rows, axis=0))[:, 0]
+        terms = self.table.interpolate(a, np.full(a.shape, np.inf), g if self.free_g else None)
+        return terms[:, :self.n_channels]
 
 
 class WavelengthModel:
@@ -424,6 +368,7 @@ class WavelengthModel:
         self.index = int(index)
         self.n_values = problem.n_values
         self._units = {}
+        self._film_of_part = {}  # first value index -> index among the reflectance films
         self._transmittance = []
         self._t_normal = float(specular_transmittance(0.0, problem.n))
         start = 0
@@ -436,10 +381,11 @@ class WavelengthModel:
                 stencil = model._stencil_table(table)
                 unit = self._units.setdefault((table.key, column), (stencil, column, []))
                 unit[2].append((slice(start, stop), float(film.r_s[index])))
+                self._film_of_part[start] = len(self._film_of_part)
             start = stop
         self._tau_min = min([u[0].tau_min for u in self._units.values() if u[1] >= 0], default=0.0)
 
-    def __call__(self, a, tau, g=None):
+    def __call__(self, a, tau, g=None, r_s_scale=None):
         """Predicted values, shape (W, n_values).
 
         Parameters
@@ -450,6 +396,10 @@ class WavelengthModel:
             Shape (W, n_groups) [-], finite.
         g : numpy.ndarray, optional
             Shape (W,) [-]; None for 0 (isotropic).
+        r_s_scale : numpy.ndarray, optional
+            Shape (W, n_reflectance_films): factor on each reflectance film's substrate
+            albedo, in problem film order (substrate albedo as a nuisance parameter, see
+            :mod:`bayespig.substrate_nuisance`); ``r_s * factor`` must stay in [0, 1].
         """
         a = np.asarray(a, dtype=float)
         tau = np.asarray(tau, dtype=float).reshape(a.shape[0], -1)
@@ -473,13 +423,30 @@ class WavelengthModel:
             black = (omega * -np.expm1(-film_tau)[:, None]) * np.exp(log_q) + stencil.specular
             through = np.exp(log_du)
             for part, r_s in films:
+                if r_s_scale is not None:
+                    r_s = r_s * r_s_scale[:, self._film_of_part[part.start]]
                 out[:, part] = black + (r_s / (1.0 - r_s * r_up))[:, None] * through
         for part, column in self._transmittance:
             out[:, part] = self._t_normal * np.exp(-tau[:, column])[:, None]
         if small is not None:
             g_small = np.zeros(small.sum()) if g is None else g[small]
-            out[small] = self.model.predict(self.index, a[small], tau[small], g_small)
+            if r_s_scale is None:
+                out[small] = self.model.predict(self.index, a[small], tau[small], g_small)
+            else:
+                out[small] = self._predict_scaled(a[small], tau[small], g_small, r_s_scale[small])
         return out
+
+    def _predict_scaled(self, a, tau, g, r_s_scale):
+        """:meth:`ForwardModel.predict` with every reflectance film's ``r_s`` scaled (slow path)."""
+        problem, parts, k = self.model.problem, [], 0
+        for film, table in zip(problem.films, self.model.film_tables):
+            film_tau = np.full(a.shape, np.inf) if film.opaque else tau[:, problem.groups.index(film.group)]
+            if film.kind == "transmittance":
+                parts.append(self._t_normal * np.exp(-film_tau)[:, None])
+                continue
+            parts.append(table(a=a, tau=film_tau, g=g, r_s=film.r_s[self.index] * r_s_scale[:, k]))
+            k += 1
+        return np.concatenate(parts, axis=-1)
 
 
 class LogPosterior:
@@ -585,6 +552,8 @@ class LogPosterior:
         With ``pointwise=True`` the terms per measured value, shape (n, n_values).
         """
         theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        if theta.shape[0] == 0:  # no walkers (e.g. every start draw left the support)
+            return np.empty((0, self.observed.size) if pointwise else 0)
         ok = self.in_support(theta)
         everywhere = ok.all()
         if not (everywhere or ok.any()):

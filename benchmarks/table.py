@@ -1,24 +1,36 @@
-"""Benchmark of the look-up tables: build, load, evaluation speed and accuracy.
+"""Benchmark of the look-up tables: build, load, evaluation speed and accuracy (issue 3).
 
 Run from the repository root::
 
-    /tmp/venv/bin/python benchmarks/table.py            # isotropic and g-axis tables (minutes)
-    /tmp/venv/bin/python benchmarks/table.py --skip-g   # isotropic table only (~1 minute)
+    /tmp/venv/bin/python benchmarks/table.py            # everything (several minutes)
+    /tmp/venv/bin/python benchmarks/table.py --skip-g   # isotropic tables only (~1 minute)
 
-Prints, for the 6-angle multi-angle instrument (``"multi-angle-45"``): the build time of the
-default isotropic table and of the table with a ``g`` axis (goals: <= 10 s and <= 60 s on 2
-cores), the time to load a table from the cache (goal: <= 0.2 s), the evaluation throughput
-in channel values per second for 16 and for 10,000 parameter sets per call, the speed-up of
-one likelihood-sized evaluation (2 samples x 6 channels) over the direct solver
-(``bayespig.predict``; goal: >= 1000x), and the largest relative interpolation error seen
-at random points against the direct solver. Tables are built into a temporary cache
-directory, so the user's cache is neither used nor changed. The machine may be shared:
-timings are wall-clock; the load average is printed with them.
+Prints
+
+* the build time of the default isotropic table of every built-in instrument and of the
+  table with a ``g`` axis for ``"multi-angle-45"`` (``--g-all``: every instrument) (goals:
+  <= 10 s and <= 60 s on 2 cores), with the CPU time the build used (a figure the machine's
+  other load does not change much; CPU / 2 is the wall time on 2 free cores);
+* the time to load a table from the cache (goal: <= 0.2 s);
+* the evaluation time per call and the throughput in channel values per second for 1, 16,
+  64 and 10,000 parameter sets per call, and the ratio of one likelihood-sized evaluation
+  (one (a, tau) on a black and a white substrate: 2 x 6 values) through the table against the
+  direct solver (``bayespig.predict``; goal: >= 1000x), also per walker for a 64-walker
+  ensemble in one call, through the table and through the likelihood's fast path
+  (``WavelengthModel``, method 4);
+* the largest relative error against the direct solver at 2,000 random points over the whole
+  domain (the sampler of ``tests/test_table.py``: shares near a -> 0, a -> 1, tau -> 0, large
+  tau, opaque, r_s = 0 and 1), per instrument, and for the g table with 40 values of g.
+
+Tables are built into a temporary cache directory, so the user's cache is neither used nor
+changed. The machine may be shared: timings are wall-clock (best of several repeats for the
+evaluations); the load average is printed with them.
 """
 
 import argparse
 import os
 import platform
+import resource
 import sys
 import tempfile
 import time
@@ -27,22 +39,26 @@ from pathlib import Path
 import numpy as np
 
 import bayespig
-from bayespig.instruments import predict
+from bayespig.data import simulate
+from bayespig.instruments import BUILT_IN_INSTRUMENTS, Instrument, predict
+from bayespig.likelihood import ForwardModel, Problem
 from bayespig.table import load_table
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from tests.test_table import domain_points  # the tests' domain sampler
 
 INSTRUMENT = "multi-angle-45"
 SEED = 20240603
-#: Random points of the accuracy check (isotropic table; for the g table, groups x size).
-ACCURACY_POINTS = 500
-G_GROUPS, G_GROUP_SIZE = 12, 10
-#: Largest finite tau sampled [-] (the issue's domain).
-TAU_MAX = 100.0
+N_POINTS = 2000
+#: Distinct g values of the g-table accuracy check (the direct solver pays per g).
+N_G_VALUES = 40
 LOAD_REPEATS = 5
-#: Ensemble size of the amortised likelihood timing.
 WALKERS = 64
+#: One likelihood-sized evaluation: one (a, tau) on black and on white (paper's method 4).
+ONE = {"a": 0.05, "tau": 2.0, "r_s": np.array([0.01, 0.95])}
 
 
-def best_time(function, min_total=0.5, min_repeats=3):
+def best_time(function, min_total=0.5, min_repeats=5):
     """Smallest wall time of one call [s], repeating for at least ``min_total`` seconds."""
     times = []
     start = time.perf_counter()
@@ -53,30 +69,11 @@ def best_time(function, min_total=0.5, min_repeats=3):
     return min(times)
 
 
-def random_parameters(rng, size, g_range=None):
-    """Random (a, tau, r_s[, g]) over the whole domain, a quarter of them opaque."""
-    a = rng.uniform(0.0, 1.0, size) ** 2
-    tau = np.exp(rng.uniform(np.log(1e-4), np.log(TAU_MAX), size))
-    tau[rng.random(size) < 0.25] = np.inf
-    r_s = rng.uniform(0.0, 1.0, size)
-    if g_range is None:
-        return {"a": a, "tau": tau, "r_s": r_s}
-    # few distinct g values: the direct solver pays per distinct g
-    g = np.repeat(rng.uniform(*g_range, size // G_GROUP_SIZE), G_GROUP_SIZE)
-    return {"a": a, "tau": tau, "r_s": r_s, "g": g}
-
-
-def max_relative_error(table, parameters):
-    values = table(**parameters)
-    reference = predict(table.instrument, **parameters)
-    return np.abs(values / reference - 1.0).max()
-
-
-def throughput(table, rng, size):
-    """Channel values per second when evaluating ``size`` parameter sets per call."""
-    parameters = random_parameters(rng, size)
-    seconds = best_time(lambda: table(**parameters))
-    return size * len(table.channels) / seconds, seconds
+def cpu_seconds():
+    """CPU time of this process and its finished children [s]."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 def load_average():
@@ -84,82 +81,143 @@ def load_average():
 
 
 def line(label, text):
-    print(f"{label:<42} {text}")
+    print(f"{label:<48} {text}", flush=True)
+
+
+def relative_error(values, reference):
+    return np.abs(values - reference) / np.maximum(np.abs(reference), 1e-12)
+
+
+def timed_build(name, cache, g):
+    start, cpu = time.perf_counter(), cpu_seconds()
+    table = load_table(name, g=g, cache_dir=cache, progress=False)
+    return table, time.perf_counter() - start, cpu_seconds() - cpu
+
+
+def evaluation_figures(table, rng, direct_seconds, g=None):
+    """Per-call times and throughput of ``table`` for several batch sizes."""
+    g_range = table.settings.g_range
+    extra = {} if g is None else {"g": g}
+    t_one = best_time(lambda: table(**ONE, **extra))
+    line("  1 set x 2 substrates (2 x 6 values):",
+         f"{t_one * 1e6:7.1f} us per call; direct solver {direct_seconds * 1e3:.1f} ms: "
+         f"ratio {direct_seconds / t_one:.0f}x   (goal >= 1000x)")
+    a = rng.uniform(0.01, 0.5, (WALKERS, 1))
+    tau = rng.uniform(0.5, 20.0, (WALKERS, 1))
+    g_w = {} if g_range is None else {"g": rng.uniform(*g_range, (WALKERS, 1))}
+    t_ens = best_time(lambda: table(a=a, tau=tau, r_s=ONE["r_s"], **g_w))
+    line(f"  {WALKERS} sets x 2 substrates in one call:",
+         f"{t_ens * 1e6:7.1f} us per call, {t_ens / WALKERS * 1e6:.2f} us per set: "
+         f"ratio {direct_seconds / (t_ens / WALKERS):.0f}x per set")
+    for size in (16, 10_000):
+        a = rng.uniform(0.0, 1.0, size) ** 2
+        tau = np.exp(rng.uniform(np.log(1e-3), np.log(100.0), size))
+        r_s = rng.uniform(0.0, 1.0, size)
+        g_s = {} if g_range is None else {"g": rng.uniform(*g_range, size)}
+        seconds = best_time(lambda a=a, tau=tau, r_s=r_s, g_s=g_s: table(a=a, tau=tau, r_s=r_s, **g_s))
+        line(f"  throughput, {size} sets per call:",
+             f"{size * len(table.channels) / seconds:10.3g} channel values/s ({seconds * 1e3:.2f} ms per call)")
+
+
+def likelihood_figures(table, rng, direct_seconds, g_free):
+    """Per-walker time of the likelihood's fast path (method 4: one film on black and white)."""
+    measurements = simulate(a=0.05, tau=2.0, design="method4", instrument=INSTRUMENT,
+                            wavelengths=[550.0], eps=0.0, seed=0, model=table)
+    problem = Problem.from_measurements(measurements, method="method4")
+    tables = {film.instrument: table for film in problem.films if film.instrument is not None}
+    model = ForwardModel(problem, g="free" if g_free else "isotropic", tables=tables)
+    fast = model.at_wavelength(0)
+    a = rng.uniform(0.01, 0.5, WALKERS)
+    tau = rng.uniform(0.5, 20.0, (WALKERS, 1))
+    g = rng.uniform(*table.settings.g_range, WALKERS) if g_free else None
+    t_fast = best_time(lambda: fast(a, tau, g))
+    line(f"  WavelengthModel, {WALKERS} walkers x {problem.n_values} values:",
+         f"{t_fast * 1e6:7.1f} us per call, {t_fast / WALKERS * 1e6:.2f} us per walker: "
+         f"ratio {direct_seconds / (t_fast / WALKERS):.0f}x per walker")
+    t_one = best_time(lambda: fast(a[:1], tau[:1], None if g is None else g[:1]))
+    line(f"  WavelengthModel, 1 walker x {problem.n_values} values:",
+         f"{t_one * 1e6:7.1f} us per call: ratio {direct_seconds / t_one:.0f}x")
+
+
+def union_instrument():
+    channels, columns = [], {}
+    for name in BUILT_IN_INSTRUMENTS:
+        columns[name] = slice(len(channels), len(channels) + len(BUILT_IN_INSTRUMENTS[name]))
+        channels.extend(BUILT_IN_INSTRUMENTS[name])
+    return Instrument("union", tuple(channels)), columns
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--skip-g", action="store_true", help="skip the (slow) table with a g axis")
+    parser.add_argument("--skip-g", action="store_true", help="skip the tables with a g axis")
+    parser.add_argument("--g-all", action="store_true",
+                        help="build a g table for every built-in instrument (not only multi-angle-45)")
     args = parser.parse_args(argv)
     rng = np.random.default_rng(SEED)
-    n_channels = len(bayespig.get_instrument(INSTRUMENT))
     print(f"bayespig {bayespig.__version__}, numpy {np.__version__}, "
           f"Python {platform.python_version()}, {os.cpu_count()} cores")
     print(f"load average at start: {load_average()}")
-    print(f"instrument {INSTRUMENT!r} ({n_channels} channels), n = 1.45")
     with tempfile.TemporaryDirectory(prefix="bayespig-bench-") as cache:
         cache = Path(cache)
-        start = time.perf_counter()
-        table = load_table(INSTRUMENT, cache_dir=cache, progress=False)
-        line("build, isotropic table:", f"{time.perf_counter() - start:8.2f} s   (goal <= 10 s; "
-             "includes writing the cache)")
+        print("\n-- isotropic tables (n = 1.45) --")
+        tables = {}
+        for name in BUILT_IN_INSTRUMENTS:
+            tables[name], wall, cpu = timed_build(name, cache, "isotropic")
+            line(f"build, {name} ({len(tables[name].channels)} channels):",
+                 f"{wall:7.2f} s   (CPU {cpu:.1f} s; goal <= 10 s; includes writing the cache)")
         load_times = []
         for _ in range(LOAD_REPEATS):
             start = time.perf_counter()
             load_table(INSTRUMENT, cache_dir=cache, progress=False)
             load_times.append(time.perf_counter() - start)
-        size_mb = sum(p.stat().st_size for p in cache.glob("*.npz")) / 1e6
-        line("load from cache:", f"{np.median(load_times):8.3f} s   (goal <= 0.2 s; median of "
-             f"{LOAD_REPEATS}; file {size_mb:.1f} MB)")
+        line(f"load from cache, {INSTRUMENT}:", f"{np.median(load_times):7.3f} s   (goal <= 0.2 s; median of "
+             f"{LOAD_REPEATS})")
 
-        for size in (16, 10_000):
-            rate, seconds = throughput(table, rng, size)
-            line(f"throughput, {size} sets per call:",
-                 f"{rate:10.3g} channel values/s   ({seconds * 1e3:.2f} ms per call)")
+        direct = best_time(lambda: predict(INSTRUMENT, **ONE), min_total=2.0)
+        print(f"\nevaluation, {INSTRUMENT} isotropic table (direct solver: {direct * 1e3:.1f} ms per "
+              "(a, tau) on 2 substrates):")
+        evaluation_figures(tables[INSTRUMENT], rng, direct)
+        likelihood_figures(tables[INSTRUMENT], rng, direct, g_free=False)
 
-        # one likelihood-sized evaluation: one (a, tau) on a black and on a white substrate
-        one = {"a": 0.05, "tau": 2.0, "r_s": np.array([0.01, 0.95])}
-        t_table = best_time(lambda: table(**one))
-        t_direct = best_time(lambda: predict(INSTRUMENT, **one), min_total=2.0)
-        shape = "x".join(str(n) for n in table(**one).shape)
-        line(f"likelihood-sized evaluation ({shape}):",
-             f"table {t_table * 1e6:.0f} us, direct solver {t_direct * 1e3:.1f} ms: "
-             f"ratio {t_direct / t_table:.0f}x   (goal >= 1000x)")
-        # the same evaluation for a whole ensemble in one call (emcee's vectorize=True)
-        a, tau = rng.uniform(0.01, 0.5, (WALKERS, 1)), rng.uniform(0.5, 20.0, (WALKERS, 1))
-        t_ensemble = best_time(lambda: table(a=a, tau=tau, r_s=one["r_s"])) / WALKERS
-        line(f"  the same, {WALKERS} walkers in one call:",
-             f"table {t_ensemble * 1e6:.0f} us per walker: ratio {t_direct / t_ensemble:.0f}x")
-
-        error = max_relative_error(table, random_parameters(rng, ACCURACY_POINTS))
-        line(f"max relative error, {ACCURACY_POINTS} random points:",
-             f"{error:.2e}   (goal <= 2e-4)")
+        a, tau, r_s = domain_points(rng, N_POINTS)
+        union, columns = union_instrument()
+        reference = predict(union, a=a, tau=tau, r_s=r_s)
+        print(f"\naccuracy, {N_POINTS} random points over the domain (max |table / solver - 1|; goal <= 2e-4):")
+        for name, table in tables.items():
+            error = relative_error(table(a=a, tau=tau, r_s=r_s), reference[:, columns[name]])
+            line(f"  {name}:", f"max {error.max():.2e}, 99th percentile {np.percentile(error.max(axis=1), 99):.1e}")
 
         if not args.skip_g:
-            start = time.perf_counter()
-            table_g = load_table(INSTRUMENT, g="free", cache_dir=cache, progress=False)
-            build_g = time.perf_counter() - start
-            settings = table_g.settings
-            line(f"build, g table (g in {settings.g_range}, {settings.n_g} nodes):",
-                 f"{build_g:8.1f} s   ({'meets' if build_g <= 60 else 'MISSES'} the goal <= 60 s)")
-            start = time.perf_counter()
-            load_table(INSTRUMENT, g="free", cache_dir=cache, progress=False)
-            line("load from cache, g table:", f"{time.perf_counter() - start:8.3f} s")
-            rate, _ = throughput_g(table_g, rng)
-            line("throughput, g table, 10000 sets per call:", f"{rate:10.3g} channel values/s")
-            n_points = G_GROUPS * G_GROUP_SIZE
-            error = max_relative_error(table_g, random_parameters(rng, n_points, settings.g_range))
-            line(f"max relative error, g table, {n_points} points:",
-                 f"{error:.2e}   (goal <= 2e-4; {G_GROUPS} values of g)")
-    print(f"load average at end: {load_average()}")
+            names = list(BUILT_IN_INSTRUMENTS) if args.g_all else [INSTRUMENT]
+            for name in names:
+                table_g, wall, cpu = timed_build(name, cache, "free")
+                s = table_g.settings
+                print(f"\n-- g table, {name}: g in {s.g_range}, {s.n_g} nodes uniform in {s.g_axis}(g), "
+                      f"{s.g_stencil}-node stencil --")
+                line("build (2 worker processes):", f"{wall:7.1f} s   (CPU {cpu:.0f} s; goal <= 60 s on 2 cores; "
+                     f"load average now {load_average()})")
+                start = time.perf_counter()
+                load_table(name, g="free", cache_dir=cache, progress=False)
+                line("load from cache:", f"{time.perf_counter() - start:7.3f} s")
+                g_values = rng.uniform(*s.g_range, N_G_VALUES)
+                g_values[:2] = s.g_range  # the ends of the axis
+                g = np.repeat(g_values, N_POINTS // N_G_VALUES)
+                a, tau, r_s = domain_points(rng, N_POINTS)
+                error = relative_error(table_g(a=a, tau=tau, g=g, r_s=r_s),
+                                       predict(name, a=a, tau=tau, g=g, r_s=r_s))
+                per_g = error.reshape(N_G_VALUES, -1).max(axis=1)
+                worst = np.argsort(per_g)[-3:][::-1]
+                line(f"accuracy, {N_POINTS} points, {N_G_VALUES} values of g:",
+                     f"max {error.max():.2e}, 99th percentile {np.percentile(error.max(axis=1), 99):.1e} "
+                     "(goal <= 2e-4); worst g: " + ", ".join(f"{g_values[i]:+.3f} ({per_g[i]:.1e})" for i in worst))
+                if name == INSTRUMENT:
+                    direct_g = best_time(lambda: predict(INSTRUMENT, **ONE, g=0.3), min_total=2.0)
+                    print(f"evaluation, g table (direct solver at g = 0.3: {direct_g * 1e3:.1f} ms per (a, tau) "
+                          "on 2 substrates):")
+                    evaluation_figures(table_g, rng, direct_g, g=0.3)
+                    likelihood_figures(table_g, rng, direct_g, g_free=True)
+    print(f"\nload average at end: {load_average()}")
     return 0
-
-
-def throughput_g(table, rng, size=10_000):
-    parameters = random_parameters(rng, size)
-    parameters["g"] = rng.uniform(*table.settings.g_range, size)
-    seconds = best_time(lambda: table(**parameters))
-    return size * len(table.channels) / seconds, seconds
 
 
 if __name__ == "__main__":
