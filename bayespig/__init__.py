@@ -14,6 +14,15 @@ from .table import load_table  # noqa: E402
 from .data import MeasurementError, MeasurementSet, read_measurements, simulate  # noqa: E402
 from .fit import fit_measurements, fit_problem  # noqa: E402
 from .studies.robustness import robustness_study  # noqa: E402
+from .inference import (  # noqa: E402
+    ConvergenceWarning,
+    InferenceSettings,
+    diagnose,
+    infer,
+    load_inference,
+    save_inference,
+    summarize,
+)
 
 __all__ = [
     "brdf",
@@ -30,4 +39,11 @@ __all__ = [
     "fit_problem",
     "fit_measurements",
     "robustness_study",
+    "infer",
+    "InferenceSettings",
+    "ConvergenceWarning",
+    "diagnose",
+    "summarize",
+    "save_inference",
+    "load_inference",
 ]

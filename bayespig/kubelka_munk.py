@@ -27,11 +27,30 @@ background of reflectance ``R_g``):
 * Saunderson (1942): ``R_m = k1 [specular included] + (1-k1)(1-k2) R_i / (1 - k2 R_i)``;
 * two-constant mixing (Duncan): ``K_mix = sum_i c_i K_i``, ``S_mix = sum_i c_i S_i``.
 
-Saunderson constants (documented defaults, both parameters):
+Baseline for measured films (:func:`saunderson_constants`, :func:`calibrate_film`,
+:func:`predict_measured`): a film measured over a dark and a light card is calibrated by
+converting both measurements to internal reflectances with Saunderson's formula, then
+solving the black/white equations for ``K*X`` and ``S*X`` (:func:`ks_from_black_white`),
+or only ``K/S`` where the film hides the card. The cards enter as *internal* background
+reflectances, i.e. as seen from inside the binder: :func:`saunderson_to_internal` of the
+bare card measured in air. With ``k1 = r_F(theta_i)`` and ``k2`` the internal diffuse
+reflectance this is exactly bayespig's substrate albedo ``r_s`` of a Lambertian card
+under clear binder (paper section 3.4, eq. 9 integrated over the sphere;
+:func:`bayespig.physics.substrate.substrate_albedo_from_air`), so both models see the same
+cards. Mixtures of calibrated pigments are predicted with :func:`mix_K_S` and
+:func:`predict_measured`; :mod:`bayespig.studies.tints` runs the full tint protocol.
+
+Saunderson constants (documented defaults, both parameters; :func:`saunderson_constants`
+gives the pair bayespig uses for a binder of index ``n`` at an incidence angle):
 
 * ``k1`` -- specular (Fresnel) reflectance of the surface for the incident beam, at
   normal incidence ``((n-1)/(n+1))^2``: 0.04 for ``n = 1.5`` (:data:`SAUNDERSON_K1`,
   :func:`saunderson_k1`).
+* specular component: an SCI measurement (sphere with the gloss trap closed) contains the
+  surface reflection ``k1``, an SCE one (trap open; also 45/0) does not; every Saunderson
+  function takes ``specular="included"|"excluded"`` without a default, since a wrong choice
+  shifts dark colours by ``k1`` (the Revigo study decides it from the data:
+  :func:`bayespig.studies.revigo.specular_evidence`).
 * ``k2`` -- internal reflectance of the surface for diffuse light from inside,
   ``2 int_0^1 r_F(mu) mu dmu`` over internal directions (:func:`saunderson_k2`): 0.596
   for ``n = 1.5`` (Judd 1942), about 0.56 for the binder index 1.45 used elsewhere in
@@ -50,18 +69,24 @@ G. Wyszecki, Color in Business, Science and Industry, 3rd ed. (Wiley 1975), ch. 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy import integrate
 
 __all__ = [
     "SAUNDERSON_K1",
     "SAUNDERSON_K2",
+    "KubelkaMunkFilm",
+    "calibrate_film",
     "k_over_s_from_reflectance_infinity",
     "ks_from_black_white",
     "layer_reflectance",
     "layer_transmittance",
     "mix_K_S",
+    "predict_measured",
     "reflectance_infinity",
+    "saunderson_constants",
     "saunderson_k1",
     "saunderson_k2",
     "saunderson_to_internal",
@@ -518,3 +543,138 @@ def ks_from_black_white(
     SX = np.where(opaque, np.inf, _artanhc(z) / np.where(opaque, 1.0, b_coth))
     KX = np.where(opaque, np.inf, np.where(opaque, 1.0, SX) * (a - 1.0))
     return KX, SX
+
+
+# --------------------------------------------------------------------------- baseline
+
+
+def saunderson_constants(refractive_index=1.45, theta_i=8.0):
+    """Saunderson ``(k1, k2)`` of a smooth binder surface of index ``n``.
+
+    ``k1`` is the unpolarised Fresnel reflectance for the instrument's incidence angle
+    (``r_F(theta_i)``: 0.03374 for ``n = 1.45`` at 8 degrees, 0.03374 at 0 degrees too);
+    ``k2`` the internal diffuse reflectance :func:`saunderson_k2` (0.5645 for
+    ``n = 1.45``). These are the same two numbers bayespig's radiative-transfer model uses
+    for the air/binder interface (paper appendix A1), so the two models see the same
+    surface; colour-matching practice often fits ``k2`` instead (0.4-0.6).
+
+    Parameters
+    ----------
+    refractive_index : float
+        Binder refractive index ``n`` [1], >= 1 (paper section 2: 1.45).
+    theta_i : float
+        Incidence angle in air [deg], in [0, 90) (8 for an 8/d sphere).
+
+    Returns
+    -------
+    tuple of float
+        ``(k1, k2)`` [1].
+    """
+    from .physics.fresnel import fresnel_reflectance
+
+    n = float(_as_array(refractive_index, "refractive_index"))
+    if n < 1.0:
+        raise ValueError("refractive_index must be >= 1 (binder denser than air)")
+    theta = float(_as_array(theta_i, "theta_i"))
+    if not 0.0 <= theta < 90.0:
+        raise ValueError(f"theta_i must lie in [0, 90) degrees, got {theta:g}")
+    k1 = float(fresnel_reflectance(np.cos(np.radians(theta)), 1.0, n))
+    return k1, saunderson_k2(n)
+
+
+@dataclass(frozen=True)
+class KubelkaMunkFilm:
+    """A film calibrated over black and white (per wavelength).
+
+    Attributes
+    ----------
+    KX, SX : numpy.ndarray
+        Absorption and scattering times thickness [1]; ``inf`` where the film hides the
+        card (opaque: only ``K/S`` is known).
+    k_over_s : numpy.ndarray
+        ``K/S`` [1], finite everywhere (from ``R_inf`` where opaque).
+    """
+
+    KX: np.ndarray
+    SX: np.ndarray
+    k_over_s: np.ndarray
+
+    @property
+    def opaque(self):
+        """Boolean array: the film hides the card (``K*X``, ``S*X`` unknown)."""
+        return np.isinf(self.SX)
+
+
+def calibrate_film(
+    measured_over_black,
+    measured_over_white,
+    background_black,
+    background_white,
+    *,
+    specular,
+    k1=SAUNDERSON_K1,
+    k2=SAUNDERSON_K2,
+):
+    """Kubelka-Munk ``K*X``, ``S*X`` and ``K/S`` of a film measured over two cards.
+
+    Both measurements are converted to internal reflectances (:func:`saunderson_to_internal`)
+    and solved by :func:`ks_from_black_white` with ``clip_to_physical=True``: noise that
+    implies ``K < 0`` gives ``K = 0``; a film that hides the card gives ``KX = SX = inf``
+    and ``K/S`` from the mean internal reflectance as ``R_inf``
+    (:func:`k_over_s_from_reflectance_infinity`).
+
+    Parameters
+    ----------
+    measured_over_black, measured_over_white : array_like
+        Reflectance of the film over the dark and the light card as measured [1].
+    background_black, background_white : array_like
+        Internal reflectance of the cards as seen from the binder [1], e.g.
+        ``saunderson_to_internal(card_in_air, k1, k2, specular=...)`` (equal to bayespig's
+        ``r_s`` of the card, see the module docstring).
+    specular : {"included", "excluded"}
+        SCI or SCE measurements.
+    k1, k2 : float
+        Saunderson constants (:func:`saunderson_constants`).
+
+    Returns
+    -------
+    KubelkaMunkFilm
+    """
+    R_b = saunderson_to_internal(measured_over_black, k1, k2, specular=specular)
+    R_w = saunderson_to_internal(measured_over_white, k1, k2, specular=specular)
+    R_b, R_w = np.minimum(R_b, 1.0), np.minimum(R_w, 1.0)
+    KX, SX = ks_from_black_white(R_b, R_w, background_black, background_white, clip_to_physical=True)
+    opaque = np.isinf(SX)
+    R_inf = np.clip(0.5 * (R_b + R_w), 1e-12, 1.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(opaque, 0.0, KX / np.where(opaque | (SX == 0), 1.0, SX))
+    k_over_s = np.where(opaque, k_over_s_from_reflectance_infinity(R_inf), ratio)
+    return KubelkaMunkFilm(KX, SX, k_over_s)
+
+
+def predict_measured(
+    KX, SX, background_reflectance, *, specular, k1=SAUNDERSON_K1, k2=SAUNDERSON_K2
+):
+    """Measured reflectance of a Kubelka-Munk film over a background.
+
+    ``R_m = Saunderson(layer_reflectance(KX, SX, 1, R_g))`` (Kubelka 1948; Saunderson 1942).
+
+    Parameters
+    ----------
+    KX, SX : array_like
+        Absorption and scattering times thickness [1], finite (for an opaque film use
+        ``saunderson_to_measured(reflectance_infinity(K/S), ...)``).
+    background_reflectance : array_like
+        Internal reflectance of the background seen from the binder [1].
+    specular, k1, k2
+        As in :func:`saunderson_to_measured`.
+
+    Returns
+    -------
+    numpy.ndarray
+        Measured reflectance [1]; arguments broadcast.
+    """
+    KX = _as_array(KX, "KX", low=0.0)
+    SX = _as_array(SX, "SX", low=0.0)
+    R_i = layer_reflectance(KX, SX, 1.0, background_reflectance)
+    return saunderson_to_measured(np.minimum(R_i, 1.0), k1, k2, specular=specular)

@@ -314,3 +314,66 @@ def test_bad_input_raises(call, match):
 def test_saunderson_requires_stating_the_specular_mode():
     with pytest.raises(TypeError):
         km.saunderson_to_internal(0.5)  # a wrong default would shift dark colours by k1
+
+
+# ------------------------------------------------------------------ baseline for measured films
+
+
+def test_saunderson_constants_for_the_binder():
+    # REFERENCE-VALUES.md section 4 (n = 1.45): normal-incidence Fresnel 0.033736, internal
+    # diffuse reflectance 0.5645; at 8 degrees r_F differs from normal incidence by < 1e-5.
+    k1_normal, k2 = km.saunderson_constants(1.45, 0.0)
+    assert k1_normal == pytest.approx(0.033736, abs=1e-6)
+    assert k2 == pytest.approx(0.5645, abs=1e-4)
+    k1_8, _ = km.saunderson_constants(1.45, 8.0)
+    assert k1_8 == pytest.approx(k1_normal, abs=1e-5)
+    assert k1_8 > k1_normal  # Fresnel reflectance grows with the angle
+    with pytest.raises(ValueError, match="theta_i"):
+        km.saunderson_constants(1.45, 90.0)
+
+
+@pytest.mark.parametrize("specular", ["excluded", "included"])
+def test_saunderson_internal_of_a_card_is_bayespig_substrate_albedo(specular, rng):
+    # Saunderson's inversion with k1 = r_F(8 deg), k2 = r_i is eq. (9) integrated over the
+    # sphere, inverted by a separate implementation in bayespig.physics.substrate.
+    from bayespig.physics.substrate import substrate_albedo_from_air
+
+    k1, k2 = km.saunderson_constants(1.45, 8.0)
+    card = rng.uniform(0.04, 0.85, 31)
+    r_s = substrate_albedo_from_air(card, n=1.45, kind="hemispherical", theta_i=8.0, specular=specular)
+    np.testing.assert_allclose(
+        km.saunderson_to_internal(card, k1, k2, specular=specular), r_s, rtol=1e-12
+    )
+
+
+@pytest.mark.parametrize("specular", ["excluded", "included"])
+def test_calibrate_film_recovers_KX_SX_and_predicts_it_back(specular, rng):
+    k1, k2 = km.saunderson_constants(1.45, 8.0)
+    KX = rng.uniform(0.01, 2.0, 31)
+    SX = rng.uniform(0.2, 4.0, 31)
+    cards = (np.full(31, 0.11), np.linspace(0.80, 0.93, 31))
+    measured = [km.predict_measured(KX, SX, g, specular=specular, k1=k1, k2=k2) for g in cards]
+    film = km.calibrate_film(*measured, *cards, specular=specular, k1=k1, k2=k2)
+    np.testing.assert_allclose(film.KX, KX, rtol=1e-8)
+    np.testing.assert_allclose(film.SX, SX, rtol=1e-8)
+    np.testing.assert_allclose(film.k_over_s, KX / SX, rtol=1e-8)
+    assert not film.opaque.any()
+
+
+def test_predict_measured_textbook_layer_over_black():
+    # Non-absorbing layer over an ideal black: R_i = SX / (1 + SX) (Kubelka 1948), then
+    # Saunderson with k1 = 0.04, k2 = 0.6 by hand.
+    R_i = 2.0 / 3.0
+    expected = 0.04 + 0.96 * 0.4 * R_i / (1.0 - 0.6 * R_i)
+    assert km.predict_measured(0.0, 2.0, 0.0, specular="included", k1=0.04, k2=0.6) == pytest.approx(
+        expected, abs=EXACT_TOL
+    )
+
+
+def test_calibrate_opaque_film_gives_k_over_s_from_R_inf():
+    # K/S = 0.25 <-> R_inf = 0.5 (textbook); an opaque film looks the same over both cards.
+    k1, k2 = 0.04, 0.6
+    R_m = km.saunderson_to_measured(0.5, k1, k2, specular="excluded")
+    film = km.calibrate_film([R_m], [R_m], [0.05], [0.85], specular="excluded", k1=k1, k2=k2)
+    assert film.opaque.all()
+    assert film.k_over_s[0] == pytest.approx(0.25, abs=1e-12)

@@ -1,0 +1,128 @@
+"""``bayespig report`` (uncertainty report of one pigment) and ``bayespig demo`` (the main job)."""
+
+from __future__ import annotations
+
+import os
+import sys
+import warnings
+
+__all__ = ["add_demo_parser", "add_report_parser", "run_demo", "run_report"]
+
+_METHODS = {"1": "method1", "2": "method2", "3": "method3", "4": "method4", "auto": "auto",
+            "general": "general"}
+
+
+def add_report_parser(subparsers):
+    """Register ``bayespig report``."""
+    from ..colorimetry import DEFAULT_ILLUMINANT, DEFAULT_OBSERVER
+
+    parser = subparsers.add_parser(
+        "report",
+        help="uncertainty report of one pigment (HTML, Markdown, figures, CSV/JSON summary)",
+        description="Write the uncertainty report of one pigment into DIR: report.html (self-"
+        "contained, opens offline), report.md with figures/*.png, summary.csv, summary.json and "
+        "posterior.nc. Given a measurement file instead of a posterior (.nc), the posterior is "
+        "inferred first (bayespig infer's defaults).",
+    )
+    parser.add_argument("source", metavar="POSTERIOR_OR_MEASUREMENTS",
+                        help="posterior netCDF from 'bayespig infer' (.nc) or a measurement file")
+    parser.add_argument("--out", required=True, help="output directory")
+    parser.add_argument("--measurements", default=None,
+                        help="the measurement file of a posterior (thickness, concentration, truth)")
+    parser.add_argument("--film", default=None,
+                        help="when inferring from a spectral table of several films (Revigo): the film id")
+    parser.add_argument("--method", default="auto", choices=sorted(_METHODS),
+                        help="when inferring: the paper's method (default auto)")
+    parser.add_argument("--seed", type=int, default=0, help="when inferring: random seed (default 0)")
+    parser.add_argument("--g", default="isotropic", choices=("isotropic", "free"),
+                        help="when inferring: g fixed at 0 (default) or a parameter")
+    parser.add_argument("--observer", default=DEFAULT_OBSERVER,
+                        help=f"colour-science observer name (default {DEFAULT_OBSERVER!r})")
+    parser.add_argument("--illuminant", default=DEFAULT_ILLUMINANT,
+                        help=f"colour-science illuminant name (default {DEFAULT_ILLUMINANT!r})")
+    parser.add_argument("--title", default=None, help="report title")
+    parser.add_argument("--no-progress", action="store_true", help="no progress output")
+    parser.set_defaults(func=run_report)
+    return parser
+
+
+def _print_warnings(caught):
+    """Print the user-facing warnings (convergence, fit bounds); library deprecations are not."""
+    for warning in caught:
+        if not issubclass(warning.category, UserWarning):
+            continue
+        print(f"bayespig: warning: {warning.message}", file=sys.stderr)
+
+
+def run_report(args):
+    """Run ``bayespig report``; returns the exit status."""
+    from ..report import write_report
+
+    if not os.path.exists(args.source):
+        raise ValueError(f"{args.source}: no such file")
+    infer_kwargs = {"method": _METHODS[args.method], "seed": args.seed, "g": args.g}
+    source = args.source
+    if args.film is not None:
+        from ..data import read_measurements
+
+        source = read_measurements(source, film=args.film)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = write_report(source, args.out, measurements=args.measurements,
+                              observer=args.observer, illuminant=args.illuminant, title=args.title,
+                              infer_kwargs=infer_kwargs, progress=not args.no_progress)
+    _print_warnings(caught)
+    _print_result(result)
+    return 0
+
+
+def _print_result(result):
+    summary = result.summary
+    flags = [f for f in summary["diagnostics"]["flags"] if f["wavelength_nm"] is not None]
+    print(f"wrote {result.files['html']} and {result.files['markdown']} "
+          f"({len(result.files['figures'])} figures), summary.csv, summary.json"
+          + (", posterior.nc" if "netcdf" in result.files else "")
+          + f" in {result.seconds:.1f} s")
+    colour = summary["colour"]
+    if colour.get("available"):
+        verdict = "good enough" if colour["good_enough_for_colour_matching"] else "NOT good enough"
+        print(f"colour spread of the measured samples: dE00 <= {colour['max_dE00_spread_measured']:.2f} "
+              f"(95th percentile) - {verdict} for colour matching")
+    if flags:
+        print(f"{len(flags)} wavelength(s) flagged: "
+              + ", ".join(f"{f['wavelength_nm']:g} nm" for f in flags), file=sys.stderr)
+
+
+def add_demo_parser(subparsers):
+    """Register ``bayespig demo``."""
+    from ..demo import DEFAULT_OUT_DIR
+
+    parser = subparsers.add_parser(
+        "demo",
+        help="the main job on a bundled SYNTHETIC pigment: simulate, infer, report",
+        description="Simulate a synthetic red-oxide-like pigment measured the method-4 way (the "
+        "same film on black and white, multi-angle-45 instrument, eps 0.05), infer its posterior "
+        "and write the uncertainty report.",
+    )
+    parser.add_argument("--out", default=str(DEFAULT_OUT_DIR),
+                        help=f"output directory (default {DEFAULT_OUT_DIR})")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the noise and the sampler (default 0)")
+    parser.add_argument("--quick", action="store_true",
+                        help="shorter runs at every second wavelength (for tests)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress output")
+    parser.set_defaults(func=run_demo)
+    return parser
+
+
+def run_demo(args):
+    """Run ``bayespig demo``; returns the exit status."""
+    from ..demo import run_demo as demo
+
+    if args.seed < 0:
+        raise ValueError(f"--seed must be a non-negative integer, got {args.seed}")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = demo(args.out, seed=args.seed, progress=not args.no_progress, quick=args.quick)
+    _print_warnings(caught)
+    _print_result(result)
+    return 0

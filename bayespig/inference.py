@@ -1,0 +1,1052 @@
+"""Bayesian inference per wavelength: emcee posteriors over ``a``, ``tau`` (and ``g``, ``eps``).
+
+For every wavelength the posterior of :class:`bayespig.likelihood.LogPosterior` (the exact
+likelihood of the paper's noise model, eq. 7, with the priors of
+:class:`bayespig.likelihood.Priors`) is sampled with emcee 3.1.6, and the result of all
+wavelengths is one :class:`arviz.InferenceData`.
+
+Sampling
+--------
+* **Coordinates**: ``[a, log tau_1..G, (g), (log eps)]``; every prior is flat on a box there.
+* **Independent ensembles**: ``n_ensembles`` ensembles of ``n_walkers`` walkers each run in one
+  :class:`emcee.EnsembleSampler` (``vectorize=True``) whose moves only combine walkers of the
+  same ensemble (:class:`IndependentEnsemblesMove`): the ensembles are independent Markov
+  chains (R-hat between them is meaningful) while every log-probability call still evaluates
+  the walkers of all ensembles at once (the call overhead dominates the cost).
+* **Start**: the point fit of :func:`bayespig.fit.fit_problem`, moved inside the prior's box,
+  plus Gaussian jitter shaped by the local curvature of the log-posterior (eigenvalues clipped,
+  so that ravines give elongated but bounded balls); draws outside the support or with
+  ``log p = -inf`` are redrawn, so no walker starts outside the support.
+* **Pre-burn**: ``min_steps / 2`` steps, after which walkers stranded far below their
+  ensemble's log-posterior (:data:`STRAGGLER_LOG_P`) are moved onto jittered good walkers of
+  the same ensemble; these steps are discarded.
+* **Run length**: in chunks, until the chain after burn-in is at least
+  ``min_autocorr_multiple`` (50) integrated autocorrelation times ``tau_int`` long (emcee's
+  estimator, averaged over the walkers of each ensemble, largest over ensembles and
+  parameters), the effective sample size ``n_ensembles * n_walkers * n_kept / tau_int`` of
+  every parameter reaches ``target_ess``, *and* the stored draws pass the diagnostics
+  (rank-normalised bulk and tail ESS >= ``target_ess``, R-hat <= 1.01; the walkers of an
+  ensemble are correlated, which the per-walker ``tau_int`` does not see); capped at
+  ``max_steps`` with a :class:`ConvergenceWarning`. Burn-in: the first
+  ``burn_in_multiple * tau_int`` steps.
+* **Moves**: ``"auto"`` is a mixture of differential-evolution moves (80 % DE, 20 % DE snooker,
+  see :class:`IndependentEnsemblesMove`), which mixes several times faster than the stretch move along the
+  curved ravines of method 3 (``benchmarks/inference.py`` measures it); ``"stretch"``,
+  ``"de"``, ``"de-snooker"`` and ``"stretch-de"`` are available.
+* **Reproducible**: the seed is split with :class:`numpy.random.SeedSequence` into one child
+  per wavelength (jitter, emcee's random state, posterior-predictive noise), so the samples of
+  a wavelength do not depend on the executor, the chunking of wavelengths into tasks, or the
+  order in which they finish.
+* **Parallel**: wavelengths are grouped into tasks run through a ``concurrent.futures``-style
+  ``executor`` (``submit``/``map``; a ``dask.distributed`` client's ``get_executor()`` works);
+  the default is a local pool of 2 processes, or serial for fewer than 4 wavelengths.
+
+InferenceData schema
+--------------------
+Dimensions: ``chain`` (one per independent ensemble), ``draw`` (``draws_per_chain`` rounded up
+to a multiple of ``n_walkers``: evenly thinned post-burn-in steps of the ensemble's walkers,
+**flattened walker-major**, ``draw = walker * n_steps_kept + step``, so each walker's thinned
+trajectory is a contiguous run and arviz's autocorrelation-based ESS and split R-hat see
+ordinary Markov chains), ``wavelength`` [nm], ``group`` (film groups), ``value`` (integer index
+of the measured values at one wavelength, films concatenated in problem order), ``parameter``.
+
+``posterior``
+    ``a`` (chain, draw, wavelength); ``tau`` (chain, draw, wavelength): ``tau`` of the first
+    film group (the thin film; for method 1 the film on glass, from its transmittance), absent
+    only when every film is opaque; ``tau_group`` (chain, draw, wavelength, group) when there
+    is more than one group; ``g`` when ``g="free"``; ``eps`` when inferred.
+``posterior_predictive``
+    ``y`` (chain, draw, wavelength, value): the noise-free model prediction of every measured
+    value; ``y_rep`` with the noise of eq. (7) added when ``settings.predictive_noise``.
+``observed_data``
+    ``y`` (wavelength, value).
+``log_likelihood``
+    ``y`` (chain, draw, wavelength, value): pointwise log-likelihood of eq. (7).
+``constant_data``
+    ``r_s`` (wavelength, value): substrate albedo seen from the binder per value (0 for
+    transmittance and opaque films); ``eps`` (wavelength, value): known relative error (NaN
+    where inferred); ``point_a``, ``point_tau`` (wavelength): the point fit (``point_tau`` of
+    the first group).
+``sample_stats``
+    ``lp`` (chain, draw, wavelength): log posterior (= log-likelihood plus a constant);
+    ``acceptance_rate`` (chain, wavelength); ``autocorr_time`` (wavelength, parameter) in
+    steps; ``n_steps``, ``n_burn_in`` (wavelength); ``thinning`` (wavelength): steps between
+    stored draws; ``max_steps_reached`` (wavelength, 0/1).
+
+Non-dimension coordinates along ``value``: ``sample`` (film name), ``channel`` (channel label,
+e.g. ``45as15``, ``sci``; ``specular_transmittance`` for a film on glass), ``kind``
+(``reflectance``/``transmittance``), ``film_group`` (``""`` for opaque films).
+
+Attributes (on the InferenceData and on every group): ``bayespig_version``,
+``numpy_version``, ``scipy_version``, ``emcee_version``, ``arviz_version``, ``seed``,
+``method``, ``g``, ``eps_mode`` (``known``/``inferred``), ``settings`` (JSON), ``priors``
+(JSON of :meth:`Priors.describe`), ``table_keys`` (JSON list), ``instruments`` (JSON: name ->
+channel labels), ``n`` (binder index), ``parameter_names`` (JSON), ``created`` (UTC ISO time).
+
+References
+----------
+Ershov, Voloboy & Pozdnyakov (2023), eq. (7) (noise model), section 3 (methods).
+Foreman-Mackey et al. (2013), emcee; Nelson et al. (2014) and ter Braak & Vrugt (2008),
+differential-evolution moves; Vehtari et al. (2021), rank-normalised R-hat and ESS.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import json
+import math
+import os
+import tempfile
+import time
+import warnings
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from .likelihood import ForwardModel, LogPosterior, Priors, Problem
+
+__all__ = [
+    "MOVES",
+    "ConvergenceWarning",
+    "IndependentEnsemblesMove",
+    "InferenceSettings",
+    "diagnose",
+    "infer",
+    "infer_problem",
+    "load_inference",
+    "save_inference",
+    "summarize",
+]
+
+#: Move mixtures by name: (proposal kind of :class:`IndependentEnsemblesMove`, weight) pairs.
+MOVES = {
+    "stretch": (("stretch", 1.0),),
+    "de": (("de", 1.0),),
+    "de-snooker": (("de", 0.8), ("snooker", 0.2)),
+    "stretch-de": (("stretch", 0.5), ("de", 0.5)),
+}
+#: What ``moves="auto"`` means (measured in benchmarks/inference.py on method 3's ravines).
+AUTO_MOVES = "de-snooker"
+#: Diagnostics thresholds (Vehtari et al. 2021).
+RHAT_MAX = 1.01
+ESS_MIN = 400
+#: Wavelength counts below which the default is to run serially (a pool costs more than it saves).
+_SERIAL_BELOW = 4
+
+
+class ConvergenceWarning(UserWarning):
+    """A posterior sample that may not represent the posterior (R-hat, ESS, run-length cap)."""
+
+
+@dataclass(frozen=True)
+class InferenceSettings:
+    """Settings of the emcee runs (recorded as JSON in every result).
+
+    Attributes
+    ----------
+    n_walkers : int
+        Walkers per ensemble (at least ``2 * n_dim``; DE-snooker needs at least 8).
+    n_ensembles : int
+        Independent ensembles (arviz chains), at least 2 for R-hat.
+    moves : str
+        ``"auto"`` or a key of :data:`MOVES`.
+    min_autocorr_multiple : float
+        The post-burn-in chain must be at least this many integrated autocorrelation times
+        long (emcee's recommendation: 50).
+    burn_in_multiple : float
+        Burn-in discarded, in autocorrelation times.
+    target_ess : float
+        Effective sample size wanted for every parameter (all walkers and ensembles).
+    min_steps, max_steps : int
+        Shortest run, and the cap (a :class:`ConvergenceWarning` when reached).
+    check_interval : int
+        Steps between convergence checks (the next chunk is extrapolated from the current
+        ``tau_int``, at least this long).
+    draws_per_chain : int
+        Stored draws per chain (rounded up to a multiple of ``n_walkers``).
+    jitter : float
+        Scale of the start ball relative to the curvature-based posterior width (0.5 starts the
+        walkers in roughly the central half of a Gaussian posterior).
+    predictive_noise : bool
+        Also store posterior-predictive values with the noise of eq. (7) (``y_rep``).
+    wavelengths_per_task : int or None
+        Wavelengths per executor task (default: about 4 tasks per pair of workers).
+    """
+
+    n_walkers: int = 16
+    n_ensembles: int = 4
+    moves: str = "auto"
+    min_autocorr_multiple: float = 50.0
+    burn_in_multiple: float = 5.0
+    target_ess: float = 1000.0
+    min_steps: int = 200
+    max_steps: int = 20000
+    check_interval: int = 100
+    draws_per_chain: int = 1024
+    jitter: float = 0.5
+    predictive_noise: bool = False
+    wavelengths_per_task: int | None = None
+
+    def __post_init__(self):
+        for name in ("n_walkers", "n_ensembles", "min_steps", "max_steps", "check_interval",
+                     "draws_per_chain"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"InferenceSettings.{name} must be a positive integer, got {value!r}")
+        if self.n_ensembles < 2:
+            raise ValueError(f"InferenceSettings.n_ensembles must be >= 2 (R-hat), got {self.n_ensembles}")
+        if self.max_steps < self.min_steps:
+            raise ValueError(f"InferenceSettings.max_steps ({self.max_steps}) must be >= min_steps "
+                             f"({self.min_steps})")
+        if self.max_steps < self.steps_kept:
+            raise ValueError(f"InferenceSettings.max_steps ({self.max_steps}) must be >= the stored steps "
+                             f"per walker, draws_per_chain / n_walkers = {self.steps_kept}")
+        for name in ("min_autocorr_multiple", "burn_in_multiple", "target_ess", "jitter"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"InferenceSettings.{name} must be a non-negative number, got {value!r}")
+        if self.jitter <= 0:
+            raise ValueError("InferenceSettings.jitter must be > 0")
+        if self.moves != "auto" and self.moves not in MOVES:
+            raise ValueError(f"InferenceSettings.moves must be 'auto' or one of {', '.join(MOVES)}, "
+                             f"got {self.moves!r}")
+        if self.wavelengths_per_task is not None and self.wavelengths_per_task < 1:
+            raise ValueError("InferenceSettings.wavelengths_per_task must be a positive integer or None")
+
+    @property
+    def move_mixture(self):
+        """The (move name, weight) pairs actually used."""
+        return MOVES[AUTO_MOVES if self.moves == "auto" else self.moves]
+
+    @property
+    def steps_kept(self):
+        """Thinned post-burn-in steps stored per walker."""
+        return math.ceil(self.draws_per_chain / self.n_walkers)
+
+    def to_json(self):
+        """The settings as a JSON string (with the resolved move mixture)."""
+        record = dataclasses.asdict(self)
+        record["move_mixture"] = [list(m) for m in self.move_mixture]
+        return json.dumps(record, sort_keys=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# moves: several independent ensembles in one sampler
+
+
+def _pick(c, index):
+    """``c[k, index[k, i]]`` for c of shape (G, h, d) and index of shape (G, m)."""
+    return c[np.arange(c.shape[0])[:, None], index]
+
+
+class IndependentEnsemblesMove:
+    """emcee ensemble moves applied to ``n_ensembles`` disjoint, contiguous blocks of walkers.
+
+    Each block is an ensemble on its own: the proposals of its walkers only use the other half
+    of the same block (red-blue update, Foreman-Mackey et al. 2013), so the blocks are
+    independent Markov chains (one arviz ``chain`` each), while every half-step evaluates the
+    proposals of all blocks in one vectorised log-probability call. The proposals are emcee's,
+    vectorised over walkers and blocks:
+
+    ``"stretch"``
+        :class:`emcee.moves.StretchMove` (Goodman & Weare 2010), ``a = 2``.
+    ``"de"``
+        :class:`emcee.moves.DEMove` (ter Braak 2006; Nelson et al. 2014):
+        ``q = x + gamma (x_j - x_k)``, ``gamma = gamma0 (1 + 1e-5 N(0, 1))``,
+        ``gamma0 = 2.38 / sqrt(2 d)``.
+    ``"snooker"``
+        The DE snooker update (ter Braak & Vrugt 2008): ``q = x + gamma u (u . (z1 - z2))``
+        with ``u`` the unit vector from a third walker ``z`` to ``x``, ``gamma = 1.7``, and the
+        Metropolis factor ``(d - 1) log(|q - z| / |x - z|)``. emcee 3.1.6's
+        :class:`~emcee.moves.DESnookerMove` normalises ``u`` by ``sqrt|x - z|`` and halves the
+        factor, which breaks detailed balance (fixed upstream in dfm/emcee#531, after 3.1.6),
+        so it is not used.
+
+    Parameters
+    ----------
+    kind : {"stretch", "de", "snooker"}
+    n_ensembles : int
+    """
+
+    KINDS = ("stretch", "de", "snooker")
+
+    def __init__(self, kind, n_ensembles):
+        if kind not in self.KINDS:
+            raise ValueError(f"kind must be one of {', '.join(self.KINDS)}, got {kind!r}")
+        self.kind = kind
+        self.n_ensembles = int(n_ensembles)
+
+    def tune(self, state, accepted):
+        """No tuning (emcee's interface)."""
+
+    def _proposal(self, s, c, random):
+        """Proposals for walkers ``s`` (G, h, d) from their ensembles' other halves ``c``."""
+        n_blocks, h, d = s.shape
+        m = c.shape[1]
+        if self.kind == "stretch":
+            z = ((2.0 - 1.0) * random.rand(n_blocks, h) + 1.0) ** 2 / 2.0
+            partner = _pick(c, random.randint(0, m, size=(n_blocks, h)))
+            return partner + z[..., None] * (s - partner), (d - 1.0) * np.log(z)
+        if self.kind == "de":
+            first = random.randint(0, m, size=(n_blocks, h))
+            second = random.randint(0, m - 1, size=(n_blocks, h))
+            second += second >= first
+            gamma = 2.38 / np.sqrt(2.0 * d) * (1.0 + 1e-5 * random.randn(n_blocks, h, 1))
+            return s + gamma * (_pick(c, first) - _pick(c, second)), np.zeros((n_blocks, h))
+        order = np.argsort(random.rand(n_blocks, h, m), axis=-1)[..., :3]
+        z, z1, z2 = (_pick(c, order[..., k]) for k in range(3))
+        delta = s - z
+        norm = np.linalg.norm(delta, axis=-1)
+        degenerate = norm == 0.0  # x on top of z: no direction; the proposal is rejected
+        u = delta / np.where(degenerate, 1.0, norm)[..., None]
+        q = s + 1.7 * u * ((u * (z1 - z2)).sum(axis=-1))[..., None]
+        with np.errstate(divide="ignore"):
+            factor = (d - 1.0) * (np.log(np.linalg.norm(q - z, axis=-1)) - np.log(norm))
+        factor[degenerate] = -np.inf
+        return q, factor
+
+    def propose(self, model, state):
+        """One red-blue update of every walker of every ensemble (emcee's Move interface)."""
+        n_total, n_dim = state.coords.shape
+        width = n_total // self.n_ensembles
+        half = width // 2
+        if width * self.n_ensembles != n_total or width % 2 or half < 3:
+            raise RuntimeError("IndependentEnsemblesMove needs an even number (>= 6) of walkers per ensemble")
+        random = model.random
+        order = np.argsort(random.rand(self.n_ensembles, width), axis=1)
+        order += (np.arange(self.n_ensembles) * width)[:, None]
+        accepted = np.zeros(n_total, dtype=bool)
+        for active, other in ((order[:, :half], order[:, half:]), (order[:, half:], order[:, :half])):
+            q, factor = self._proposal(state.coords[active], state.coords[other], random)
+            q = q.reshape(-1, n_dim)
+            index = active.reshape(-1)
+            new_log_probs, _ = model.compute_log_prob_fn(q)
+            ok = factor.reshape(-1) + new_log_probs - state.log_prob[index] > np.log(random.rand(index.size))
+            state.coords[index[ok]] = q[ok]
+            state.log_prob[index[ok]] = new_log_probs[ok]
+            accepted[index] = ok
+        return state, accepted
+
+
+def _moves(settings):
+    return [(IndependentEnsemblesMove(kind, settings.n_ensembles), weight)
+            for kind, weight in settings.move_mixture]
+
+
+# ---------------------------------------------------------------------------------------------
+# one wavelength
+
+
+def _inside(theta, lower, upper, margin=1e-6):
+    span = upper - lower
+    return np.clip(theta, lower + margin * span, upper - margin * span)
+
+
+def _start_covariance(log_post, theta0):
+    """Covariance of the start ball: inverse of the negative Hessian of log p at ``theta0``.
+
+    Finite differences (one vectorised call); eigenvalues of the covariance are clipped to
+    ``[(1e-6 span)^2, (span / 4)^2]`` so that flat directions (ravines, plateaus) give a
+    bounded ball and a non-concave point a small one.
+    """
+    n_dim = theta0.size
+    span = log_post.upper - log_post.lower
+    h = 1e-4 * span
+    points = [theta0]
+    for i in range(n_dim):
+        for j in range(i, n_dim):
+            for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+                p = theta0.copy()
+                p[i] += si * h[i]
+                p[j] += sj * h[j]
+                points.append(p)
+    points = _inside(np.array(points), log_post.lower, log_post.upper, margin=0.0)
+    values = log_post(points)
+    hessian = np.zeros((n_dim, n_dim))
+    k = 1
+    for i in range(n_dim):
+        for j in range(i, n_dim):
+            pp, pm, mp, mm = values[k:k + 4]
+            k += 4
+            hessian[i, j] = hessian[j, i] = (pp - pm - mp + mm) / (4.0 * h[i] * h[j])
+    scale = np.diag(span)
+    if not np.isfinite(hessian).all():
+        return scale @ np.eye(n_dim) @ scale * 1e-6
+    # in units of the box so that the clipping is meaningful for every coordinate
+    precision = -(scale @ hessian @ scale)
+    eigval, eigvec = np.linalg.eigh(0.5 * (precision + precision.T))
+    variance = 1.0 / np.clip(eigval, 16.0, 1e12)
+    return scale @ (eigvec * variance) @ eigvec.T @ scale
+
+
+def _initial_walkers(log_post, theta0, n_total, jitter, rng):
+    """``n_total`` start points inside the support with finite log-posterior."""
+    theta0 = _inside(np.asarray(theta0, dtype=float), log_post.lower, log_post.upper, margin=1e-3)
+    cov = _start_covariance(log_post, theta0) * jitter ** 2
+    chol = np.linalg.cholesky(cov + 1e-18 * np.eye(theta0.size))
+    walkers = np.empty((n_total, theta0.size))
+    missing = np.arange(n_total)
+    for _ in range(100):
+        draws = theta0 + rng.standard_normal((missing.size, theta0.size)) @ chol.T
+        ok = log_post.in_support(draws)
+        if ok.any():
+            ok[ok] = np.isfinite(log_post(draws[ok]))
+        walkers[missing[ok]] = draws[ok]
+        missing = missing[~ok]
+        if missing.size == 0:
+            return walkers
+        chol = chol * 0.5
+    raise RuntimeError(f"could not place walkers with finite log-posterior around {theta0}")
+
+
+def _autocorr_times(chain, n_ensembles):
+    """Integrated autocorrelation time per parameter [steps], largest over the ensembles.
+
+    A walker that did not move at all (stuck) makes the estimate undefined; it is then the
+    chain length (not converged).
+    """
+    from emcee.autocorr import integrated_time
+
+    width = chain.shape[1] // n_ensembles
+    if (np.ptp(chain, axis=0) == 0).any():
+        return np.full(chain.shape[2], float(chain.shape[0]))
+    taus = [integrated_time(chain[:, k * width:(k + 1) * width], c=5, tol=0, quiet=True)
+            for k in range(n_ensembles)]
+    tau = np.max(taus, axis=0)
+    return np.where(np.isfinite(tau), tau, float(chain.shape[0]))
+
+
+#: A walker this far (in log-posterior) below its ensemble's median after the pre-burn is a
+#: straggler: for a d-dimensional near-Gaussian posterior the spread of log p is ~ sqrt(d / 2).
+STRAGGLER_LOG_P = 25.0
+
+
+def _replace_stragglers(state, log_post, n_ensembles, rng):
+    """Move walkers far below their ensemble's median log p onto (jittered) good walkers."""
+    coords, log_prob = state.coords, state.log_prob
+    width = coords.shape[0] // n_ensembles
+    for k in range(n_ensembles):
+        block = np.arange(k * width, (k + 1) * width)
+        lp = log_prob[block]
+        bad = block[lp < np.median(lp) - STRAGGLER_LOG_P]
+        good = block[lp >= np.median(lp)]
+        if bad.size == 0:
+            continue
+        spread = coords[good].std(axis=0) + 1e-12
+        for walker in bad:
+            for _ in range(20):
+                candidate = coords[rng.choice(good)] + 1e-2 * spread * rng.standard_normal(coords.shape[1])
+                value = log_post(candidate[None])[0] if log_post.in_support(candidate[None])[0] else -np.inf
+                if np.isfinite(value):
+                    coords[walker], log_prob[walker] = candidate, value
+                    break
+    return state
+
+
+def _stored_draws_pass(theta, target_ess):
+    """Rank-normalised bulk and tail ESS >= target and R-hat <= RHAT_MAX for every parameter."""
+    import arviz as az
+
+    for k in range(theta.shape[-1]):
+        x = theta[..., k]
+        if az.rhat(x) > RHAT_MAX:
+            return False
+        if min(az.ess(x, method="bulk"), az.ess(x, method="tail")) < target_ess:
+            return False
+    return True
+
+
+def _sample_wavelength(log_post, theta0, settings, seed_sequence):
+    """emcee run at one wavelength; returns draws (chains, draws, n_dim) and run statistics."""
+    import emcee
+
+    jitter_seed, emcee_seed, predictive_seed, straggler_seed = seed_sequence.spawn(4)
+    n_total = settings.n_walkers * settings.n_ensembles
+    if settings.n_walkers < 2 * log_post.n_dim or settings.n_walkers % 2 or settings.n_walkers < 6:
+        raise ValueError(f"InferenceSettings.n_walkers must be even, >= 6 and >= 2 * n_dim = "
+                         f"{2 * log_post.n_dim} for parameters {log_post.parameter_names}")
+    start = _initial_walkers(log_post, theta0, n_total, settings.jitter, np.random.default_rng(jitter_seed))
+    sampler = emcee.EnsembleSampler(n_total, log_post.n_dim, log_post, vectorize=True, moves=_moves(settings))
+    sampler.random_state = np.random.RandomState(np.random.MT19937(emcee_seed)).get_state()
+    kept = settings.steps_kept
+    width, n_chains = settings.n_walkers, settings.n_ensembles
+
+    def per_chain(x):  # (kept, n_total, ...) -> (chains, walkers * kept, ...), walker-major
+        x = x.reshape((kept, n_chains, width) + x.shape[2:])
+        x = np.moveaxis(x, 0, 2)  # (chains, walkers, kept, ...)
+        return x.reshape((n_chains, width * kept) + x.shape[3:])
+
+    def stored(burn):
+        thin = max(1, (steps - burn) // kept)
+        rows = steps - 1 - thin * np.arange(kept)[::-1]
+        return thin, per_chain(sampler.get_chain()[rows]), per_chain(sampler.get_log_prob()[rows])
+
+    # pre-burn: let the ensembles spread out, then move stragglers (walkers stranded far below
+    # their ensemble's log-posterior, which ensemble moves cannot bring back), and start afresh
+    pre_steps = max(1, settings.min_steps // 2)
+    state = sampler.run_mcmc(start, pre_steps, progress=False)
+    state = _replace_stragglers(state, log_post, n_chains, np.random.default_rng(straggler_seed))
+    sampler.reset()
+    steps, chunk = 0, max(settings.min_steps, settings.check_interval)
+    capped = False
+    while True:
+        chunk = int(min(chunk, settings.max_steps - steps))
+        state = sampler.run_mcmc(state, chunk, progress=False, skip_initial_state_check=True)
+        steps += chunk
+        # tau_int from the second half (free of the start transient), then burn-in from it
+        tau = _autocorr_times(sampler.get_chain()[steps // 2:], settings.n_ensembles)
+        tau_max = float(tau.max())
+        burn = max(0, min(math.ceil(settings.burn_in_multiple * tau_max), steps - kept))
+        ess = n_total * (steps - burn) / tau
+        needed = max(settings.min_autocorr_multiple * tau_max,
+                     settings.target_ess * tau_max / n_total, kept) + burn
+        if steps >= needed and (ess >= settings.target_ess).all():
+            # emcee's criterion met; the stored draws must pass the diagnostics too (walkers of
+            # an ensemble are correlated, which the per-walker tau_int does not see)
+            thin, theta, log_prob = stored(burn)
+            if _stored_draws_pass(theta, settings.target_ess):
+                break
+            chunk = max(settings.check_interval, steps // 2)
+        else:
+            chunk = max(settings.check_interval, int(1.1 * needed) - steps)
+        if steps >= settings.max_steps:
+            capped = True
+            thin, theta, log_prob = stored(burn)
+            break
+    accepted = sampler.acceptance_fraction.reshape(n_chains, width).mean(axis=1)
+    return {
+        "theta": theta,
+        "lp": log_prob,
+        "acceptance_rate": accepted,
+        "autocorr_time": tau,
+        "n_steps": steps,
+        "n_burn_in": burn,
+        "thin": thin,
+        "max_steps_reached": capped,
+        "predictive_seed": predictive_seed,
+    }
+
+
+def _wavelength_outputs(log_post, run, settings):
+    """Posterior quantities, predictions and pointwise log-likelihood from one run."""
+    theta = run.pop("theta")
+    n_chains, n_draws, n_dim = theta.shape
+    flat = theta.reshape(-1, n_dim)
+    a, tau, g, eps = log_post.unpack(flat)
+    model = log_post.evaluate(a, tau, g if log_post.free_g else None)
+    pointwise = log_post.log_likelihood(flat, pointwise=True)
+    shape = (n_chains, n_draws)
+    out = {
+        "a": a.reshape(shape),
+        "tau": tau.reshape(shape + (tau.shape[1],)),
+        "y": model.reshape(shape + (-1,)),
+        "log_likelihood": pointwise.reshape(shape + (-1,)),
+        **run,
+    }
+    if log_post.free_g:
+        out["g"] = g.reshape(shape)
+    if log_post.infer_eps:
+        k = 1 + log_post.n_groups + log_post.free_g
+        out["eps"] = np.exp(flat[:, k]).reshape(shape)
+    if settings.predictive_noise:
+        rng = np.random.default_rng(run["predictive_seed"])
+        noisy = model * (1.0 + np.broadcast_to(eps, model.shape) * rng.standard_normal(model.shape))
+        out["y_rep"] = noisy.reshape(shape + (-1,))
+    out.pop("predictive_seed")
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# tasks (run in workers)
+
+#: Look-up tables per worker process, keyed by (g, n): instrument -> table.
+_WORKER_TABLES = {}
+
+
+@dataclass(frozen=True)
+class _Task:
+    problem: Problem
+    g: str
+    eps: float | None
+    priors: Priors
+    settings: InferenceSettings
+    indices: tuple
+    starts: np.ndarray  # (len(indices), n_dim)
+    seeds: tuple  # SeedSequence per index
+
+
+def _run_task(task):
+    """Sample the wavelengths of one task (runs in a worker process)."""
+    tables = _WORKER_TABLES.setdefault((task.g, task.problem.n), {})
+    model = ForwardModel(task.problem, g=task.g, tables=tables)
+    results = []
+    for index, start, seed in zip(task.indices, task.starts, task.seeds):
+        log_post = LogPosterior(model, index, task.priors, g=task.g, eps=task.eps)
+        run = _sample_wavelength(log_post, start, task.settings, seed)
+        results.append(_wavelength_outputs(log_post, run, task.settings))
+    return results
+
+
+def _map_tasks(tasks, executor, progress):
+    """Results of every task in order, through ``executor`` (None: serial)."""
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=sum(len(t.indices) for t in tasks), desc="inference", unit="λ")
+    results = []
+    try:
+        if executor is None:
+            for task in tasks:
+                results.append(_run_task(task))
+                if bar is not None:
+                    bar.update(len(task.indices))
+        else:
+            futures = [executor.submit(_run_task, task) for task in tasks]
+            for task, future in zip(tasks, futures):
+                results.append(future.result())
+                if bar is not None:
+                    bar.update(len(task.indices))
+    finally:
+        if bar is not None:
+            bar.close()
+    return results
+
+
+# ---------------------------------------------------------------------------------------------
+# entries
+
+
+def _resolve_eps(eps, measurements):
+    """``(eps for LogPosterior, mode)`` from the ``eps`` argument."""
+    if isinstance(eps, str):
+        if eps != "infer":
+            raise ValueError(f"eps must be a positive number, None or 'infer', got {eps!r}")
+        return None, "inferred"
+    if eps is None:
+        metadata = getattr(measurements, "metadata", None) or {}
+        value = metadata.get("eps") if isinstance(metadata, dict) else None
+        eps = float(value) if isinstance(value, (int, float)) and value > 0 else 0.05
+    eps = float(eps)
+    if not (np.isfinite(eps) and eps > 0):
+        raise ValueError(f"eps must be a positive number, None or 'infer', got {eps!r}")
+    return eps, "known"
+
+
+def _point_starts(problem, g, tables, priors, log_post0, n_wavelengths):
+    """Point-fit starts ``[a, log tau.., (g), (log eps)]`` per wavelength, and the fit."""
+    from .fit import FitSettings, fit_problem
+
+    fit_settings = FitSettings(tau_bounds=tuple(float(v) for v in priors.tau_range),
+                               a_bounds=tuple(float(v) for v in priors.a_range))
+    fit = fit_problem(problem, g=0.0, tables=tables, settings=fit_settings, warn=False)
+    columns = [fit.a[:, None], np.log(np.maximum(fit.tau, 1e-300))]
+    if g == "free":
+        columns.append(np.zeros((n_wavelengths, 1)))
+    if log_post0.infer_eps:
+        rms = np.clip(fit.rms_relative_deviation, priors.eps_range[0], priors.eps_range[1])
+        columns.append(np.log(rms)[:, None])
+    return np.concatenate(columns, axis=1), fit
+
+
+def _value_coordinates(problem):
+    """Per measured value: sample, channel, kind, film_group, and r_s (n_wavelengths, n_values)."""
+    sample, channel, kind, group, r_s = [], [], [], [], []
+    for film in problem.films:
+        k = film.observed.shape[1]
+        sample += [film.name.split(":")[0]] * k
+        kind += [film.kind] * k
+        group += [film.group or ""] * k
+        if film.kind == "transmittance":
+            channel += ["specular_transmittance"] * k
+        else:
+            channel += list(film.instrument.labels)
+        r_s.append(np.repeat(np.asarray(film.r_s, dtype=float)[:, None], k, axis=1))
+    return sample, channel, kind, group, np.concatenate(r_s, axis=1)
+
+
+def _versions():
+    import arviz
+    import emcee
+    import scipy
+
+    from . import __version__
+
+    return {"bayespig_version": __version__, "numpy_version": np.__version__,
+            "scipy_version": scipy.__version__, "emcee_version": emcee.__version__,
+            "arviz_version": arviz.__version__}
+
+
+def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, progress=True,
+                  priors=None, settings=None, tables=None):
+    """Posterior samples of a :class:`~bayespig.likelihood.Problem` at every wavelength.
+
+    Parameters as :func:`infer`, except ``eps``: a positive number (known, for films without
+    their own) or None (inferred); ``tables`` optionally passes look-up tables
+    (instrument -> table) for the point fit and serial runs.
+
+    Returns
+    -------
+    arviz.InferenceData
+        See the module docstring for the schema.
+    """
+    import arviz as az
+    import xarray as xr
+
+    if not isinstance(problem, Problem):
+        raise TypeError(f"problem must be a bayespig.likelihood.Problem, got {type(problem).__name__}")
+    if g not in ("isotropic", "free"):
+        raise ValueError(f"g must be 'isotropic' or 'free', got {g!r}")
+    if not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    priors = Priors() if priors is None else priors
+    settings = InferenceSettings() if settings is None else settings
+    if not isinstance(priors, Priors):
+        raise TypeError(f"priors must be a bayespig.likelihood.Priors, got {type(priors).__name__}")
+    if not isinstance(settings, InferenceSettings):
+        raise TypeError(f"settings must be an InferenceSettings, got {type(settings).__name__}")
+    started = time.perf_counter()
+    tables = {} if tables is None else tables
+    model = ForwardModel(problem, g=g, tables=tables)
+    log_post0 = LogPosterior(model, 0, priors, g=g, eps=eps)
+    n_wl = problem.n_wavelengths
+    starts, fit = _point_starts(problem, g, model.tables, priors, log_post0, n_wl)
+    seeds = np.random.SeedSequence(int(seed)).spawn(n_wl)
+
+    own_pool = None
+    if executor is None and n_wl >= _SERIAL_BELOW:
+        own_pool = executor = ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1))
+    per_task = settings.wavelengths_per_task or max(1, math.ceil(n_wl / 8))
+    if executor is None:
+        per_task = n_wl
+    tasks = [_Task(problem, g, eps, priors, settings, tuple(range(i, min(i + per_task, n_wl))),
+                   starts[i:i + per_task], tuple(seeds[i:i + per_task]))
+             for i in range(0, n_wl, per_task)]
+    if executor is None:
+        _WORKER_TABLES.setdefault((g, problem.n), {}).update(model.tables)
+    try:
+        chunks = _map_tasks(tasks, executor, progress)
+    finally:
+        if own_pool is not None:
+            own_pool.shutdown()
+    results = [r for chunk in chunks for r in chunk]
+
+    def stack(name, axis=2):
+        return np.stack([r[name] for r in results], axis=axis)
+
+    wavelength = np.asarray(problem.wavelength_nm, dtype=float)
+    groups = list(problem.groups)
+    n_chains = settings.n_ensembles
+    n_draws = settings.steps_kept * settings.n_walkers
+    coords = {"chain": np.arange(n_chains), "draw": np.arange(n_draws), "wavelength": wavelength}
+    sample, channel, kind, film_group, r_s = _value_coordinates(problem)
+    value_coords = {"value": np.arange(len(sample)), "sample": ("value", sample),
+                    "channel": ("value", channel), "kind": ("value", kind),
+                    "film_group": ("value", film_group)}
+    cdw = ("chain", "draw", "wavelength")
+    posterior = {"a": (cdw, stack("a"))}
+    if groups:
+        tau = stack("tau")  # (chain, draw, wavelength, group)
+        posterior["tau"] = (cdw, tau[..., 0])
+        if len(groups) > 1:
+            posterior["tau_group"] = (cdw + ("group",), tau)
+    if g == "free":
+        posterior["g"] = (cdw, stack("g"))
+    if log_post0.infer_eps:
+        posterior["eps"] = (cdw, stack("eps"))
+    post_coords = dict(coords)
+    if len(groups) > 1:
+        post_coords["group"] = groups
+    predictive = {"y": (cdw + ("value",), stack("y"))}
+    if settings.predictive_noise:
+        predictive["y_rep"] = (cdw + ("value",), stack("y_rep"))
+    parameters = list(log_post0.parameter_names)
+    sample_stats = {
+        "lp": (cdw, stack("lp")),
+        "acceptance_rate": (("chain", "wavelength"), stack("acceptance_rate", axis=1)),
+        "autocorr_time": (("wavelength", "parameter"), stack("autocorr_time", axis=0)),
+        "n_steps": (("wavelength",), np.array([r["n_steps"] for r in results])),
+        "n_burn_in": (("wavelength",), np.array([r["n_burn_in"] for r in results])),
+        "thinning": (("wavelength",), np.array([r["thin"] for r in results])),
+        "max_steps_reached": (("wavelength",), np.array([int(r["max_steps_reached"]) for r in results])),
+    }
+    observed = np.stack([problem.observed(i) for i in range(n_wl)])
+    known = problem.known_eps(eps)
+    constant = {
+        "r_s": (("wavelength", "value"), r_s),
+        "eps": (("wavelength", "value"), np.broadcast_to(known, (n_wl, known.size)).copy()),
+        "point_a": (("wavelength",), fit.a),
+        "point_tau": (("wavelength",), fit.tau[:, 0] if groups else np.full(n_wl, np.inf)),
+    }
+    instruments = {}
+    for film in problem.films:
+        if film.instrument is not None:
+            instruments[str(film.instrument.name)] = list(film.instrument.labels)
+    attrs = {
+        **_versions(),
+        "seed": int(seed),
+        "method": problem.method,
+        "g": g,
+        "eps_mode": "inferred" if log_post0.infer_eps else "known",
+        "settings": settings.to_json(),
+        "priors": json.dumps(priors.describe(), sort_keys=True),
+        "table_keys": json.dumps(list(model.table_keys)),
+        "instruments": json.dumps(instruments, sort_keys=True),
+        "n": float(problem.n),
+        "parameter_names": json.dumps(parameters),
+        "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        "sampling_wall_time_s": float(time.perf_counter() - started),
+    }
+    datasets = {
+        "posterior": xr.Dataset(posterior, coords=post_coords),
+        "posterior_predictive": xr.Dataset(predictive, coords={**coords, **value_coords}),
+        "log_likelihood": xr.Dataset({"y": (cdw + ("value",), stack("log_likelihood"))},
+                                     coords={**coords, **value_coords}),
+        "observed_data": xr.Dataset({"y": (("wavelength", "value"), observed)},
+                                    coords={"wavelength": wavelength, **value_coords}),
+        "constant_data": xr.Dataset(constant, coords={"wavelength": wavelength, **value_coords}),
+        "sample_stats": xr.Dataset(sample_stats, coords={**coords, "parameter": parameters}),
+    }
+    for dataset in datasets.values():
+        dataset.attrs.update(attrs)
+    idata = az.InferenceData(attrs=attrs, **datasets)
+    capped = [w for w, r in zip(wavelength, results) if r["max_steps_reached"]]
+    if capped:
+        warnings.warn(
+            f"run length capped at max_steps={settings.max_steps} before reaching "
+            f"{settings.min_autocorr_multiple:g} autocorrelation times / ESS {settings.target_ess:g} at "
+            + ", ".join(f"{w:g} nm" for w in capped), ConvergenceWarning, stacklevel=2)
+    return idata
+
+
+def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, executor=None,
+          progress=True, priors=None, settings=None):
+    """Posterior of ``a`` and ``tau`` (and ``g``, ``eps``) per wavelength from a measurement set.
+
+    Parameters
+    ----------
+    measurements : MeasurementSet or path
+        A set, or a file read with :func:`bayespig.read_measurements`.
+    method : {"auto", "method1", "method2", "method3", "method4", "general", 1, 2, 3, 4}
+        The paper's method (section 3) whose samples enter the likelihood; ``"auto"`` picks the
+        most robust one the samples support (4, 1, 2, 3), else ``"general"`` (every film).
+    seed : int
+        Seeds every random draw (bit-for-bit reproducible, whatever the executor).
+    g : {"isotropic", "free"}
+        ``g = 0`` (the paper's recommendation) or ``g`` a parameter, uniform on the prior's
+        range (needs look-up tables with a ``g`` axis).
+    eps : float, "infer" or None
+        Relative measurement error of eq. (7) [-] for samples without their own: known
+        (default: the set's metadata ``eps`` when it has one, e.g. a simulated set, else 0.05),
+        or ``"infer"``: one ``eps`` per wavelength shared by those samples, log-uniform prior.
+    executor : concurrent.futures.Executor, optional
+        Runs the wavelengths in parallel (``submit``); e.g. a ``dask.distributed`` client's
+        ``get_executor()``. Default: a local pool of 2 processes (serial below 4 wavelengths).
+    progress : bool
+        Progress bar over wavelengths.
+    priors : Priors, optional
+        Default: ``a`` uniform on [0, 1], ``tau`` log-uniform on [0.01, 100], ``g`` uniform on
+        [-0.5, 0.8], ``eps`` log-uniform on [0.001, 0.5].
+    settings : InferenceSettings, optional
+
+    Returns
+    -------
+    arviz.InferenceData
+        Posterior ``a``, ``tau`` (chain, draw, wavelength) and the rest of the schema in the
+        module docstring.
+
+    Raises
+    ------
+    ValueError, MeasurementError
+        For a file that cannot be read or a method the samples do not support.
+
+    Warns
+    -----
+    ConvergenceWarning
+        When a run reached ``settings.max_steps`` before its length criterion.
+
+    References
+    ----------
+    Ershov, Voloboy & Pozdnyakov (2023), eq. (7), section 3.
+    """
+    from .data import MeasurementSet, read_measurements
+
+    if not isinstance(measurements, MeasurementSet):
+        if isinstance(measurements, (str, os.PathLike)):
+            measurements = read_measurements(measurements)
+        else:
+            raise TypeError("measurements must be a MeasurementSet or a path, "
+                            f"got {type(measurements).__name__}")
+    if isinstance(method, (int, np.integer)) or method in ("1", "2", "3", "4"):
+        method = f"method{int(method)}"
+    eps_value, _ = _resolve_eps(eps, measurements)
+    problem = Problem.from_measurements(measurements, method)
+    return infer_problem(problem, seed=seed, g=g, eps=eps_value, executor=executor,
+                         progress=progress, priors=priors, settings=settings)
+
+
+# ---------------------------------------------------------------------------------------------
+# summaries and diagnostics
+
+
+def _parameter_views(idata):
+    """(name, DataArray over chain, draw, wavelength) of the summarised parameters."""
+    posterior = idata.posterior
+    views = [("a", posterior["a"])]
+    if "tau" in posterior:
+        views.append(("tau", posterior["tau"]))
+    for name in ("g", "eps"):
+        if name in posterior:
+            views.append((name, posterior[name]))
+    return views
+
+
+def summarize(idata, hdi_prob=0.9):
+    """Per-wavelength summary of the posterior (arviz): mean, sd, HDI, ESS, R-hat, corr(a, log tau).
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+        From :func:`infer`.
+    hdi_prob : float
+        Probability mass of the highest-density interval.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per wavelength (index ``wavelength`` [nm]); per parameter ``p`` in ``a``,
+        ``tau`` (and ``g``, ``eps``): ``p_mean``, ``p_sd``, ``p_hdi_low``, ``p_hdi_high``,
+        ``p_ess_bulk``, ``p_ess_tail``, ``p_r_hat``; and ``corr_a_log_tau``, the posterior
+        correlation of ``a`` with ``log tau`` (pooled draws).
+    """
+    import arviz as az
+    import pandas as pd
+
+    if not 0 < hdi_prob < 1:
+        raise ValueError(f"hdi_prob must lie in (0, 1), got {hdi_prob}")
+    posterior = idata.posterior
+    wavelength = posterior["wavelength"].values
+    table = {}
+    for name, da in _parameter_views(idata):
+        values = da.transpose("chain", "draw", "wavelength").values
+        table[f"{name}_mean"] = values.mean(axis=(0, 1))
+        table[f"{name}_sd"] = values.std(axis=(0, 1), ddof=1)
+        hdi = az.hdi(da, hdi_prob=hdi_prob)[da.name].transpose("wavelength", "hdi").values
+        table[f"{name}_hdi_low"], table[f"{name}_hdi_high"] = hdi[:, 0], hdi[:, 1]
+        table[f"{name}_ess_bulk"] = az.ess(da, method="bulk")[da.name].values
+        table[f"{name}_ess_tail"] = az.ess(da, method="tail")[da.name].values
+        table[f"{name}_r_hat"] = az.rhat(da)[da.name].values
+    if "tau" in posterior:
+        a = posterior["a"].transpose("wavelength", "chain", "draw").values.reshape(wavelength.size, -1)
+        log_tau = np.log(posterior["tau"].transpose("wavelength", "chain", "draw").values).reshape(
+            wavelength.size, -1)
+        a_c = a - a.mean(axis=1, keepdims=True)
+        t_c = log_tau - log_tau.mean(axis=1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            table["corr_a_log_tau"] = (a_c * t_c).sum(axis=1) / np.sqrt(
+                (a_c ** 2).sum(axis=1) * (t_c ** 2).sum(axis=1))
+    frame = pd.DataFrame(table, index=pd.Index(wavelength, name="wavelength"))
+    return frame
+
+
+def diagnose(idata, *, rhat_max=RHAT_MAX, ess_min=ESS_MIN, warn=True):
+    """Wavelengths whose sample may not represent the posterior.
+
+    Flags R-hat above ``rhat_max`` or bulk/tail ESS below ``ess_min`` for any summarised
+    parameter (Vehtari et al. 2021), and runs that reached ``max_steps``.
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+    rhat_max, ess_min : float
+    warn : bool
+        Emit one :class:`ConvergenceWarning` listing every flagged wavelength.
+
+    Returns
+    -------
+    list of str
+        One line per flagged wavelength, ``"<λ> nm: <reasons>"`` (empty when all pass).
+    """
+    summary = summarize(idata)
+    names = [name for name, _ in _parameter_views(idata)]
+    stats = idata.sample_stats if "sample_stats" in idata.groups() else None
+    capped = (stats["max_steps_reached"].values.astype(bool)
+              if stats is not None and "max_steps_reached" in stats else np.zeros(len(summary), bool))
+    lines = []
+    for k, (wavelength, row) in enumerate(summary.iterrows()):
+        reasons = []
+        for name in names:
+            r_hat = row[f"{name}_r_hat"]
+            if not np.isfinite(r_hat) or r_hat > rhat_max:
+                reasons.append(f"R-hat({name}) = {r_hat:.3f} > {rhat_max:g}")
+            for kind in ("bulk", "tail"):
+                ess = row[f"{name}_ess_{kind}"]
+                if not np.isfinite(ess) or ess < ess_min:
+                    reasons.append(f"ESS_{kind}({name}) = {ess:.0f} < {ess_min:g}")
+        if capped[k]:
+            reasons.append("run length capped at max_steps")
+        if reasons:
+            lines.append(f"{wavelength:g} nm: " + "; ".join(reasons))
+    if warn and lines:
+        warnings.warn(f"{len(lines)} wavelength(s) not converged:\n  " + "\n  ".join(lines),
+                      ConvergenceWarning, stacklevel=2)
+    return lines
+
+
+# ---------------------------------------------------------------------------------------------
+# files
+
+
+def save_inference(idata, path):
+    """Write ``idata`` to a netCDF file atomically (temporary file in the same directory, then
+    :func:`os.replace`); nothing is left half-written on failure.
+
+    Returns
+    -------
+    str
+        The path written.
+    """
+    path = os.fspath(path)
+    directory = os.path.dirname(os.path.abspath(path))
+    os.makedirs(directory, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(dir=directory, prefix=".tmp-", suffix=".nc")
+    os.close(handle)
+    try:
+        idata.to_netcdf(temporary)
+        os.chmod(temporary, 0o666 & ~_umask())
+        os.replace(temporary, path)
+    except BaseException:
+        if os.path.exists(temporary):
+            os.unlink(temporary)
+        raise
+    return path
+
+
+def _umask():
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def load_inference(path):
+    """Read an InferenceData written by :func:`save_inference` (netCDF, no pickle).
+
+    Raises
+    ------
+    ValueError
+        When the file is missing or not an inference result.
+    """
+    import arviz as az
+
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise ValueError(f"{path}: no such file")
+    try:
+        idata = az.from_netcdf(path)
+    except (OSError, ValueError) as error:
+        raise ValueError(f"{path}: not a netCDF inference file ({error})") from None
+    if "posterior" not in idata.groups() or "a" not in idata.posterior:
+        raise ValueError(f"{path}: no posterior of 'a' — not written by bayespig.infer")
+    return idata

@@ -1,0 +1,722 @@
+"""The numbers of an uncertainty report, computed from a posterior (no plotting, no files).
+
+Everything here reads an arviz ``InferenceData`` written by :func:`bayespig.infer`
+(schema: ``posterior`` ``a``, ``tau``, optional ``tau_group``, ``g``, ``eps`` over
+``(chain, draw, wavelength)``; ``posterior_predictive``/``observed_data`` ``y`` over
+``(wavelength, value)`` with the coordinates ``sample``, ``channel``, ``kind``,
+``film_group`` along ``value``; ``constant_data`` ``r_s``, ``eps``, ``point_a``,
+``point_tau``) and turns it into plain arrays and dicts:
+
+* parameter bands: median, 50 % and 90 % central intervals, mean and sd per wavelength;
+* the extinction coefficient ``k_ext = tau / H`` and cross-section ``sigma_ext = tau / (H D)``
+  when thickness ``H`` and concentration ``D`` are known (paper appendix A2; only
+  ``D sigma_ext`` matters, so ``sigma_ext`` is in the user's concentration units);
+* convergence diagnostics (bulk ESS and rank-normalised R-hat, arviz) and flagged wavelengths;
+* fit quality: residuals of every measured value in units of its relative error ``eps``
+  (paper eq. 7: ``(x_obs - x_model) / (eps x_model)`` is standard normal at the truth);
+* colour (CIELAB, CIEDE2000 through :mod:`bayespig.colorimetry`) of every measured sample
+  and geometry, measured and predicted, and the posterior spread of the predicted colour;
+* predicted colour, with its posterior spread, of films that were not measured (another
+  thickness, another substrate, opaque), through the look-up tables on posterior draws.
+
+Posterior draws at different wavelengths come from independent runs; the per-wavelength
+posteriors are independent (the likelihood factorises over wavelengths and so do the
+priors), so pairing draw ``k`` of every wavelength is a draw from the joint posterior of
+the spectrum -- which is what a colour needs.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import colorimetry
+from ..data.model import BLACK_SUBSTRATE_ALBEDO, WHITE_SUBSTRATE_ALBEDO, parse_measurement_geometry
+from ..instruments import Channel, Instrument
+from ..likelihood import FilmTerm, Priors, Problem
+
+__all__ = [
+    "COLOUR_MATCH_DELTA_E",
+    "ESS_MIN",
+    "RHAT_MAX",
+    "SPREAD_QUANTILE",
+    "FilmDesign",
+    "Lab_to_sRGB",
+    "Ravine",
+    "colour_available",
+    "colour_spectrum",
+    "default_unmeasured_films",
+    "diagnostics",
+    "eps_per_value",
+    "extinction",
+    "film_colour",
+    "measured_colour",
+    "parameter_bands",
+    "posterior_draws",
+    "predicted_film_values",
+    "priors_from_inference",
+    "problem_from_inference",
+    "provenance",
+    "ravine",
+    "residuals_in_eps",
+    "value_table",
+    "wavelengths",
+]
+
+#: R-hat above this flags a wavelength (Vehtari et al. 2021 recommend 1.01).
+RHAT_MAX = 1.01
+#: Bulk effective sample size below this flags a wavelength (Vehtari et al. 2021: 100 per
+#: chain for four chains, i.e. enough for stable 5 %/95 % quantiles).
+ESS_MIN = 400
+#: A colour difference below this (CIEDE2000) is taken as good enough for colour matching.
+COLOUR_MATCH_DELTA_E = 1.0
+#: Central credible intervals shown everywhere, as (lower, upper) quantiles.
+BANDS = {"50": (0.25, 0.75), "90": (0.05, 0.95)}
+#: Colour spread quantile: ``Delta E00`` of posterior draws from the posterior-mean colour.
+SPREAD_QUANTILE = 0.95
+
+_MEASUREMENT_KINDS = ("brdf", "hemispherical", "reflectance_factor")
+_RANGE = re.compile(r"\[\s*([-+0-9.eE]+)\s*,\s*([-+0-9.eE]+)\s*\]")
+
+
+# ------------------------------------------------------------------------------------------
+# reading the InferenceData
+
+
+def _attrs(idata):
+    """The posterior's attributes (where :func:`bayespig.infer` records provenance)."""
+    attrs = dict(getattr(idata, "attrs", {}) or {})
+    attrs.update(idata.posterior.attrs)
+    return attrs
+
+
+def _json_attr(value):
+    """An attribute that may be JSON text, parsed; anything else returned as is."""
+    if isinstance(value, (bytes, bytearray)):
+        value = value.decode()
+    if isinstance(value, str):
+        try:
+            return json.loads(value)
+        except ValueError:
+            return value
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def provenance(idata):
+    """The posterior's attributes with JSON text parsed, for the report's provenance section."""
+    return {str(k): _json_attr(v) for k, v in _attrs(idata).items()}
+
+
+def priors_from_inference(idata):
+    """The :class:`~bayespig.likelihood.Priors` recorded in the posterior's attributes.
+
+    Reads the ``priors`` attribute: either the ranges (``a_range``, ``tau_range``, ...) or
+    the text of :meth:`Priors.describe` (``"log-uniform on [0.01, 100]"``); parameters it
+    does not give keep the defaults of :class:`Priors`.
+    """
+    recorded = _json_attr(_attrs(idata).get("priors"))
+    ranges = {}
+    if isinstance(recorded, dict):
+        for key, value in recorded.items():
+            name = key if key.endswith("_range") else f"{key}_range"
+            if name not in ("a_range", "tau_range", "g_range", "eps_range"):
+                continue
+            if isinstance(value, (list, tuple)) and len(value) == 2:
+                ranges[name] = (float(value[0]), float(value[1]))
+            elif isinstance(value, str):
+                match = _RANGE.search(value)
+                if match:
+                    ranges[name] = (float(match.group(1)), float(match.group(2)))
+    return Priors(**ranges)
+
+
+def wavelengths(idata):
+    """Wavelengths of the posterior [nm], shape (n_wavelengths,)."""
+    return np.asarray(idata.posterior["wavelength"].values, dtype=float)
+
+
+def posterior_draws(idata, name, max_draws=None):
+    """Posterior draws of one variable, chains stacked: shape (n_draws, n_wavelengths, ...).
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+    name : str
+        Variable of the ``posterior`` group (``"a"``, ``"tau"``, ``"tau_group"``, ``"g"``,
+        ``"eps"``).
+    max_draws : int, optional
+        Keep at most this many draws, evenly spaced (deterministic thinning).
+
+    Returns
+    -------
+    numpy.ndarray
+    """
+    values = np.asarray(idata.posterior[name].values, dtype=float)
+    values = values.reshape((-1,) + values.shape[2:])
+    return _thin(values, max_draws)
+
+
+def _thin(values, max_draws):
+    if max_draws is None or values.shape[0] <= max_draws:
+        return values
+    keep = np.unique(np.linspace(0, values.shape[0] - 1, max_draws).round().astype(int))
+    return values[keep]
+
+
+def _value_coord(idata, name, group="observed_data"):
+    data = getattr(idata, group)["y"]
+    if name in data.coords:
+        return [str(v) for v in np.asarray(data.coords[name].values).ravel()]
+    return None
+
+
+def _channel_of(label, kind):
+    """An instrument :class:`Channel` from a measured value's channel label (and kind)."""
+    kinds = (kind,) if kind in _MEASUREMENT_KINDS else _MEASUREMENT_KINDS
+    for candidate in kinds:
+        try:
+            angles = parse_measurement_geometry(candidate, label)
+        except ValueError:
+            continue
+        return Channel(candidate, angles["theta_i"], angles["theta_o"], angles["delta_phi"],
+                       angles["specular"], angles["label"])
+    raise ValueError(f"channel label {label!r} is not a BRDF, hemispherical or 45/0 geometry")
+
+
+def value_table(idata):
+    """Per measured value: sample, channel, kind and film group (observed-data coordinates).
+
+    Returns
+    -------
+    list of dict
+        One dict per value along the ``value`` dimension.
+    """
+    n_values = idata.observed_data["y"].shape[-1]
+    columns = {}
+    for name in ("sample", "channel", "kind", "film_group"):
+        values = _value_coord(idata, name)
+        columns[name] = values if values is not None else [""] * n_values
+    return [{name: columns[name][k] for name in columns} for k in range(n_values)]
+
+
+def _is_transmittance(row):
+    return "transmittance" in row["kind"] or row["channel"] in ("normal", "transmittance")
+
+
+def problem_from_inference(idata):
+    """The :class:`~bayespig.likelihood.Problem` that a posterior was inferred from.
+
+    Rebuilt from the observed data, the constant data (``r_s`` and ``eps`` per value) and
+    the value coordinates, so that a saved netCDF file alone is enough for the ravine
+    figure and the predictions.
+
+    Returns
+    -------
+    Problem
+    """
+    wl = wavelengths(idata)
+    observed = np.asarray(idata.observed_data["y"].values, dtype=float)
+    constant = getattr(idata, "constant_data", None)
+    r_s = (np.asarray(constant["r_s"].values, dtype=float)
+           if constant is not None and "r_s" in constant else np.zeros_like(observed))
+    eps = (np.asarray(constant["eps"].values, dtype=float)
+           if constant is not None and "eps" in constant else np.full_like(observed, np.nan))
+    rows = value_table(idata)
+    attrs = _attrs(idata)
+    n = float(_json_attr(attrs.get("n", 1.45)))
+    films, groups = [], []
+    start = 0
+    while start < len(rows):
+        stop = start + 1
+        while stop < len(rows) and rows[stop]["sample"] == rows[start]["sample"] and \
+                _is_transmittance(rows[stop]) == _is_transmittance(rows[start]):
+            stop += 1
+        first = rows[start]
+        group = first["film_group"] or None
+        opaque = group is None or group in ("", "none", "None", "opaque")
+        group = None if opaque else group
+        if group is not None and group not in groups:
+            groups.append(group)
+        film_eps = eps[:, start]
+        known = float(film_eps[0]) if np.isfinite(film_eps).all() and np.ptp(film_eps) == 0 else None
+        if _is_transmittance(first):
+            films.append(FilmTerm(first["sample"], "transmittance", None, group, np.zeros(wl.size),
+                                  observed[:, start:stop], known))
+        else:
+            channels = tuple(_channel_of(rows[k]["channel"], rows[k]["kind"]) for k in range(start, stop))
+            instrument = Instrument(f"sample:{first['sample']}", channels, n)
+            films.append(FilmTerm(first["sample"], "reflectance", instrument, group,
+                                  np.ascontiguousarray(r_s[:, start]), observed[:, start:stop], known))
+        start = stop
+    method = str(_json_attr(attrs.get("method", "general")))
+    return Problem(wl, tuple(films), tuple(groups), n, method)
+
+
+# ------------------------------------------------------------------------------------------
+# parameters
+
+
+def parameter_bands(draws):
+    """Median, 50 % and 90 % central intervals, mean and sd over the first axis.
+
+    Parameters
+    ----------
+    draws : numpy.ndarray
+        Shape (n_draws, ...).
+
+    Returns
+    -------
+    dict
+        ``mean``, ``sd``, ``median``, ``q05``, ``q25``, ``q75``, ``q95``, each shape (...).
+    """
+    q = np.quantile(draws, [0.05, 0.25, 0.5, 0.75, 0.95], axis=0)
+    return {"mean": draws.mean(axis=0), "sd": draws.std(axis=0, ddof=1), "median": q[2],
+            "q05": q[0], "q25": q[1], "q75": q[3], "q95": q[4]}
+
+
+def extinction(tau_draws, thickness_um, concentration=None):
+    """Extinction coefficient and cross-section from optical-thickness draws (appendix A2).
+
+    ``tau = k_ext H = D sigma_ext H``, so ``k_ext = tau / H`` and ``sigma_ext = tau / (D H)``.
+
+    Parameters
+    ----------
+    tau_draws : numpy.ndarray
+        Optical thickness draws [-].
+    thickness_um : float
+        Dry film thickness ``H`` [µm].
+    concentration : float, optional
+        Pigment concentration ``D`` (appendix A2, up to the arbitrary scale ``mu``)
+        [concentration units].
+
+    Returns
+    -------
+    dict
+        ``k_ext`` [1/µm] and, with a concentration, ``sigma_ext`` [1/µm per concentration unit].
+
+    References
+    ----------
+    Ershov, Voloboy & Pozdnyakov (2023), appendix A2.
+    """
+    if not (thickness_um is not None and np.isfinite(thickness_um) and thickness_um > 0):
+        raise ValueError(f"thickness_um must be a positive number [µm], got {thickness_um!r}")
+    out = {"k_ext": np.asarray(tau_draws) / thickness_um}
+    if concentration is not None:
+        if not (np.isfinite(concentration) and concentration > 0):
+            raise ValueError(f"concentration must be a positive number, got {concentration!r}")
+        out["sigma_ext"] = out["k_ext"] / concentration
+    return out
+
+
+def diagnostics(idata, variables=None, *, rhat_max=RHAT_MAX, ess_min=ESS_MIN, priors=None):
+    """Bulk ESS and R-hat per wavelength, and the wavelengths that need attention.
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+    variables : sequence of str, optional
+        Posterior variables to check (default ``a``, ``tau``, and ``g``/``eps`` when present).
+    rhat_max, ess_min : float
+        Flag thresholds (defaults :data:`RHAT_MAX`, :data:`ESS_MIN`).
+    priors : Priors, optional
+        A ``tau`` posterior whose 95 % quantile reaches half the prior's upper bound is
+        flagged too: the data cannot tell the film from an opaque one there.
+
+    Returns
+    -------
+    dict
+        ``ess`` and ``rhat``: variable -> array (n_wavelengths,); ``flags``: list of
+        ``{"wavelength_nm", "reasons"}``; ``n_chains``, ``n_draws``.
+    """
+    import arviz as az
+
+    posterior = idata.posterior
+    if variables is None:
+        variables = [v for v in ("a", "tau", "g", "eps") if v in posterior]
+    n_chains = posterior.sizes["chain"]
+    ess = az.ess(posterior[variables], method="bulk")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rhat = az.rhat(posterior[variables]) if n_chains > 1 else None
+    ess_out = {v: np.asarray(ess[v].values, dtype=float) for v in variables}
+    rhat_out = ({v: np.asarray(rhat[v].values, dtype=float) for v in variables}
+                if rhat is not None else {v: np.full(ess_out[v].shape, np.nan) for v in variables})
+    wl = wavelengths(idata)
+    flags = {}
+    try:
+        from ..inference import diagnose
+    except ImportError:  # pragma: no cover - the inference layer ships with the package
+        diagnose = None
+    if diagnose is not None and "tau" in posterior:
+        for line in diagnose(idata, rhat_max=rhat_max, ess_min=ess_min, warn=False):
+            head, _, reasons = line.partition(" nm: ")
+            flags.setdefault(float(head), []).extend(reasons.split("; "))
+    else:
+        for i, w in enumerate(wl):
+            for v in variables:
+                if np.isfinite(rhat_out[v][i]) and rhat_out[v][i] > rhat_max:
+                    flags.setdefault(float(w), []).append(f"R-hat({v}) = {rhat_out[v][i]:.3f} > {rhat_max:g}")
+                if not ess_out[v][i] >= ess_min:
+                    flags.setdefault(float(w), []).append(f"ESS({v}) = {ess_out[v][i]:.0f} < {ess_min:g}")
+    if "tau" in posterior:
+        tau_q95 = np.quantile(posterior_draws(idata, "tau"), 0.95, axis=0)
+        tau_limit = (priors or priors_from_inference(idata)).tau_range[1] / 2.0
+        for i, w in enumerate(wl):
+            if tau_q95[i] >= tau_limit:
+                flags.setdefault(float(w), []).append(
+                    f"tau reaches {tau_q95[i]:.3g} (95 % quantile): the film is not told from an opaque one")
+    flags = [{"wavelength_nm": w, "reasons": flags[w]} for w in sorted(flags)]
+    if n_chains < 2:
+        flags.insert(0, {"wavelength_nm": None, "reasons": ["one chain only: R-hat is not available"]})
+    return {"ess": ess_out, "rhat": rhat_out, "flags": flags, "n_chains": int(n_chains),
+            "n_draws": int(posterior.sizes["draw"]), "rhat_max": rhat_max, "ess_min": ess_min}
+
+
+# ------------------------------------------------------------------------------------------
+# fit quality
+
+
+def eps_per_value(idata):
+    """Relative error ``eps`` (eq. 7) of every measured value, shape (n_wavelengths, n_values) [-].
+
+    The known value from ``constant_data``; where ``eps`` was inferred (NaN there), the
+    posterior median of that wavelength.
+    """
+    observed = idata.observed_data["y"]
+    eps = np.full(observed.shape, np.nan)
+    constant = getattr(idata, "constant_data", None)
+    if constant is not None and "eps" in constant:
+        eps = np.asarray(constant["eps"].values, dtype=float).copy()
+    if np.isnan(eps).any() and "eps" in idata.posterior:
+        inferred = np.median(posterior_draws(idata, "eps"), axis=0)
+        inferred = np.broadcast_to(inferred.reshape(inferred.shape[0], -1), eps.shape)
+        eps = np.where(np.isnan(eps), inferred, eps)
+    return eps
+
+
+def residuals_in_eps(idata, max_draws=None):
+    """Residuals of every measured value in units of its relative error (paper eq. 7).
+
+    ``z = (x_obs - x_pred) / (eps x_pred)`` with ``x_pred`` the posterior-mean noise-free
+    prediction; at the truth ``z`` is standard normal, so ``|z| > 3`` marks a value the
+    model does not explain.
+
+    Returns
+    -------
+    dict
+        ``observed``, ``predicted_mean``, ``predicted_q05``, ``predicted_q95``, ``eps``, ``z``,
+        each (n_wavelengths, n_values); ``rows``: the value table.
+    """
+    observed = np.asarray(idata.observed_data["y"].values, dtype=float)
+    predicted = np.asarray(idata.posterior_predictive["y"].values, dtype=float)
+    predicted = _thin(predicted.reshape((-1,) + predicted.shape[2:]), max_draws)
+    mean = predicted.mean(axis=0)
+    q05, q95 = np.quantile(predicted, [0.05, 0.95], axis=0)
+    eps = eps_per_value(idata)
+    z = (observed - mean) / (eps * mean)
+    return {"observed": observed, "predicted_mean": mean, "predicted_q05": q05,
+            "predicted_q95": q95, "predicted_draws": predicted, "eps": eps, "z": z,
+            "rows": value_table(idata)}
+
+
+# ------------------------------------------------------------------------------------------
+# colour
+
+
+def colour_spectrum(values, channel_kind):
+    """A channel's values as a reflectance spectrum for colorimetry.
+
+    BRDF values [1/sr] become reflectance factors ``pi f`` (relative to the perfect
+    diffuser); hemispherical reflectances and 45°/0° reflectance factors are used as they are.
+    """
+    return np.pi * np.asarray(values) if channel_kind == "brdf" else np.asarray(values)
+
+
+def _colour_stats(wl, spectra, observer, illuminant):
+    """Lab of the posterior-mean spectrum and Delta E00 of each draw from it, batched.
+
+    Parameters
+    ----------
+    spectra : numpy.ndarray
+        Shape (..., n_draws, n_wavelengths).
+
+    Returns
+    -------
+    lab_mean : numpy.ndarray
+        Shape (..., 3).
+    spread : numpy.ndarray
+        Shape (..., n_draws).
+    """
+    lab_mean = colorimetry.reflectance_to_Lab(spectra.mean(axis=-2), wl, observer=observer,
+                                              illuminant=illuminant)
+    lab_draws = colorimetry.reflectance_to_Lab(spectra, wl, observer=observer, illuminant=illuminant)
+    spread = colorimetry.delta_E2000(lab_draws, lab_mean[..., None, :])
+    return lab_mean, spread
+
+
+def Lab_to_sRGB(Lab, wavelength_nm=None, *, observer=colorimetry.DEFAULT_OBSERVER,
+                illuminant=colorimetry.DEFAULT_ILLUMINANT):
+    """Display sRGB (0-1, clipped) of CIELAB values, for colour swatches only.
+
+    Lab is converted back to XYZ with the white the Lab values were computed with (that of
+    ``wavelength_nm``, ``observer`` and ``illuminant``, :func:`bayespig.colorimetry.white_point_XYZ`)
+    and chromatically adapted to sRGB's D65 white (CAT02) by colour-science.
+    """
+    import colour
+
+    white = colorimetry.white_point_XYZ(wavelength_nm, observer=observer, illuminant=illuminant)
+    white_xy = white[:2] / white.sum()
+    with colour.domain_range_scale("reference"):
+        XYZ = colour.Lab_to_XYZ(np.asarray(Lab, dtype=float), illuminant=white_xy)
+        rgb = colour.XYZ_to_sRGB(XYZ, illuminant=white_xy, chromatic_adaptation_transform="CAT02")
+    return np.clip(rgb, 0.0, 1.0)
+
+
+def colour_available(wl):
+    """Whether the wavelengths cover enough of the visible range for colorimetry (reason if not)."""
+    try:
+        colorimetry.weighting_matrix(wl)
+    except ValueError as error:
+        return False, str(error)
+    return True, ""
+
+
+def measured_colour(idata, *, observer=colorimetry.DEFAULT_OBSERVER,
+                    illuminant=colorimetry.DEFAULT_ILLUMINANT, max_draws=400, residuals=None):
+    """CIELAB of every measured reflectance (sample and geometry), measured and predicted.
+
+    Returns
+    -------
+    list of dict
+        One per measured reflectance spectrum: ``sample``, ``channel``, ``Lab_measured``,
+        ``Lab_predicted`` (of the posterior-mean prediction), ``dE00_measured_predicted``,
+        ``dE00_spread`` (the :data:`SPREAD_QUANTILE` quantile of ``Delta E00`` of posterior
+        draws from the posterior-mean colour), ``sRGB_measured``, ``sRGB_predicted``.
+    """
+    wl = wavelengths(idata)
+    residuals = residuals or residuals_in_eps(idata, max_draws=max_draws)
+    draws = _thin(residuals["predicted_draws"], max_draws)
+    columns = [k for k, row in enumerate(residuals["rows"]) if not _is_transmittance(row)]
+    if not columns:
+        return []
+    kinds = [_channel_of(residuals["rows"][k]["channel"], residuals["rows"][k]["kind"]).kind for k in columns]
+    measured = np.stack([colour_spectrum(residuals["observed"][:, k], kind) for k, kind in zip(columns, kinds)])
+    predicted = np.stack([colour_spectrum(draws[:, :, k], kind) for k, kind in zip(columns, kinds)])
+    lab_measured = colorimetry.reflectance_to_Lab(measured, wl, observer=observer, illuminant=illuminant)
+    lab_mean, spread = _colour_stats(wl, predicted, observer, illuminant)
+    difference = colorimetry.delta_E2000(lab_measured, lab_mean)
+    spread_q = np.quantile(spread, SPREAD_QUANTILE, axis=-1)
+    rgb_measured = Lab_to_sRGB(lab_measured, wl, observer=observer, illuminant=illuminant)
+    rgb_predicted = Lab_to_sRGB(lab_mean, wl, observer=observer, illuminant=illuminant)
+    out = []
+    for j, k in enumerate(columns):
+        row = residuals["rows"][k]
+        out.append({
+            "sample": row["sample"], "channel": row["channel"],
+            "Lab_measured": lab_measured[j], "Lab_predicted": lab_mean[j],
+            "dE00_measured_predicted": float(difference[j]),
+            "dE00_spread": float(spread_q[j]),
+            "sRGB_measured": rgb_measured[j], "sRGB_predicted": rgb_predicted[j],
+        })
+    return out
+
+
+@dataclass(frozen=True)
+class FilmDesign:
+    """A film to predict: the pigment at ``tau_scale`` times the first film group's ``tau``.
+
+    Attributes
+    ----------
+    label : str
+    tau_scale : float
+        ``inf`` for an opaque film [-].
+    r_s : float
+        Substrate albedo seen from the binder [-] (ignored when opaque).
+    measured : bool
+        Whether a measured film is this one (then the prediction checks the fit).
+    """
+
+    label: str
+    tau_scale: float
+    r_s: float = BLACK_SUBSTRATE_ALBEDO
+    measured: bool = False
+
+
+def default_unmeasured_films(problem):
+    """Opaque; the measured film group at twice and half its ``tau`` on black and white; and
+    the film on the substrate it was not measured on (e.g. white for method 3)."""
+    group = problem.groups[0] if problem.groups else None
+    measured_r_s = [float(np.median(f.r_s)) for f in problem.films
+                    if f.kind == "reflectance" and f.group == group and group is not None]
+    films = [FilmDesign("opaque (hiding)", np.inf, 0.0, measured=any(f.opaque for f in problem.films
+                                                                     if f.kind == "reflectance"))]
+    for name, r_s in (("black", BLACK_SUBSTRATE_ALBEDO), ("white", WHITE_SUBSTRATE_ALBEDO)):
+        if not any(abs(m - r_s) < 0.02 for m in measured_r_s):
+            films.append(FilmDesign(f"1 x tau on {name}", 1.0, r_s))
+    for scale in (0.5, 2.0):
+        for name, r_s in (("black", BLACK_SUBSTRATE_ALBEDO), ("white", WHITE_SUBSTRATE_ALBEDO)):
+            films.append(FilmDesign(f"{scale:g} x tau on {name}", scale, r_s))
+    return films
+
+
+def _reference_instrument(problem):
+    for film in problem.films:
+        if film.kind == "reflectance":
+            return film.instrument
+    raise ValueError("the posterior has no reflectance measurements to predict films from")
+
+
+def predicted_film_values(idata, films, *, instrument=None, max_draws=400, tables=None):
+    """Channel values of unmeasured films for posterior draws, through the look-up tables.
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+    films : sequence of FilmDesign
+    instrument : Instrument, optional
+        Default: the channels of the first measured reflectance film.
+    max_draws : int
+    tables : dict, optional
+        ``{"isotropic"|"free": LookupTable}`` to reuse.
+
+    Returns
+    -------
+    instrument : Instrument
+    values : numpy.ndarray
+        Shape (n_films, n_draws, n_wavelengths, n_channels).
+    """
+    from ..table import load_table
+
+    problem = problem_from_inference(idata)
+    instrument = instrument or _reference_instrument(problem)
+    g_kind = "free" if "g" in idata.posterior else "isotropic"
+    tables = {} if tables is None else tables
+    table = tables.get(g_kind) or load_table(instrument, g=g_kind, n=problem.n, progress=False)
+    tables[g_kind] = table
+    a = posterior_draws(idata, "a", max_draws)
+    tau = posterior_draws(idata, "tau", max_draws)
+    g = posterior_draws(idata, "g", max_draws) if g_kind == "free" else np.zeros_like(a)
+    out = np.empty((len(films), a.shape[0], a.shape[1], len(instrument)))
+    for j, film in enumerate(films):
+        film_tau = np.full(a.shape, np.inf) if not np.isfinite(film.tau_scale) else film.tau_scale * tau
+        # beyond the table's thickest finite film the layer hides its substrate (opaque limit)
+        film_tau = np.where(film_tau > table.settings.tau_nodes[-1], np.inf, film_tau)
+        r_s = 0.0 if not np.isfinite(film.tau_scale) else film.r_s
+        out[j] = table(a=a, tau=film_tau, g=g, r_s=r_s)
+    return instrument, out
+
+
+def film_colour(idata, films, *, observer=colorimetry.DEFAULT_OBSERVER,
+                illuminant=colorimetry.DEFAULT_ILLUMINANT, max_draws=400, instrument=None):
+    """Predicted colour, with its posterior spread, of films at every channel of an instrument.
+
+    Returns
+    -------
+    list of dict
+        One per (film, channel): ``film``, ``channel``, ``measured`` (bool), ``Lab`` (of the
+        posterior-mean spectrum), ``dE00_spread``, ``sRGB``.
+    """
+    wl = wavelengths(idata)
+    instrument, values = predicted_film_values(idata, films, instrument=instrument, max_draws=max_draws)
+    spectra = np.stack([colour_spectrum(values[..., k], ch.kind) for k, ch in enumerate(instrument.channels)],
+                       axis=1)  # (film, channel, draw, wavelength)
+    lab_mean, spread = _colour_stats(wl, spectra, observer, illuminant)
+    spread_q = np.quantile(spread, SPREAD_QUANTILE, axis=-1)
+    rgb = Lab_to_sRGB(lab_mean, wl, observer=observer, illuminant=illuminant)
+    out = []
+    for j, film in enumerate(films):
+        for k, channel in enumerate(instrument.channels):
+            out.append({"film": film.label, "channel": channel.label, "measured": film.measured,
+                        "Lab": lab_mean[j, k], "dE00_spread": float(spread_q[j, k]), "sRGB": rgb[j, k]})
+    return out
+
+
+@dataclass
+class Ravine:
+    """The log-likelihood landscape over ``(a, tau)`` at one wavelength.
+
+    Attributes
+    ----------
+    wavelength_nm : float
+    a : numpy.ndarray
+        Grid of ``a``, shape (n_a,) [-].
+    tau : numpy.ndarray
+        Grid of ``tau`` (log-spaced), shape (n_tau,) [-].
+    log_likelihood : numpy.ndarray
+        Shape (n_tau, n_a): eq. (7) log-likelihood, other parameters at their posterior medians.
+    held : dict
+        Parameters held at their posterior medians.
+    """
+
+    wavelength_nm: float
+    a: np.ndarray
+    tau: np.ndarray
+    log_likelihood: np.ndarray
+    held: dict = field(default_factory=dict)
+
+
+def ravine(idata, index, *, a_limits=None, tau_limits=None, n_grid=121, problem=None, model=None):
+    """Log-likelihood (eq. 7) over a grid of ``(a, tau)`` at wavelength ``index``.
+
+    Uses :class:`~bayespig.likelihood.LogPosterior` (the sampled density) on the problem
+    rebuilt from the posterior; further film groups' ``tau``, ``g`` and an inferred ``eps``
+    are held at their posterior medians.
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+    index : int
+        Wavelength index.
+    a_limits, tau_limits : tuple, optional
+        Grid ranges (default: the prior box).
+    n_grid : int
+        Grid points per axis.
+
+    Returns
+    -------
+    Ravine
+    """
+    from ..likelihood import ForwardModel, LogPosterior
+
+    problem = problem or problem_from_inference(idata)
+    g_kind = "free" if "g" in idata.posterior else "isotropic"
+    model = model or ForwardModel(problem, g_kind)
+    priors = priors_from_inference(idata)
+    eps = eps_per_value(idata)[index]
+    infer_eps = "eps" in idata.posterior
+    known = None if infer_eps else (float(eps[0]) if np.all(eps == eps[0]) else None)
+    if not infer_eps and known is None:
+        # per-film eps: carried by the films of the rebuilt problem
+        known = float(np.median(eps))
+    log_post = LogPosterior(model, index, priors, g_kind, None if infer_eps else known)
+    a_limits = a_limits or priors.a_range
+    tau_limits = tau_limits or priors.tau_range
+    a_grid = np.linspace(a_limits[0], a_limits[1], n_grid)
+    tau_grid = np.geomspace(tau_limits[0], tau_limits[1], n_grid)
+    A, T = np.meshgrid(a_grid, tau_grid)
+    theta = [A.ravel(), np.log(T.ravel())]
+    held = {}
+    if len(problem.groups) > 1:
+        tau_groups = np.median(posterior_draws(idata, "tau_group")[:, index], axis=0)
+        for k in range(1, len(problem.groups)):
+            theta.append(np.full(A.size, np.log(tau_groups[k])))
+            held[f"tau[{problem.groups[k]}]"] = float(tau_groups[k])
+    if log_post.free_g:
+        g_med = float(np.median(posterior_draws(idata, "g")[:, index]))
+        theta.append(np.full(A.size, g_med))
+        held["g"] = g_med
+    if log_post.infer_eps:
+        eps_med = float(np.median(posterior_draws(idata, "eps")[:, index]))
+        theta.append(np.full(A.size, np.log(eps_med)))
+        held["eps"] = eps_med
+    theta = np.column_stack(theta)
+    # keep the grid inside the support (the box edges are inclusive)
+    theta = np.clip(theta, log_post.lower, log_post.upper)
+    value = log_post.log_likelihood(theta).reshape(A.shape)
+    return Ravine(float(problem.wavelength_nm[index]), a_grid, tau_grid, value, held)

@@ -1,0 +1,705 @@
+"""Write the uncertainty report of one pigment: HTML, Markdown, figures, CSV/JSON summary.
+
+:func:`write_report` takes a posterior (arviz ``InferenceData`` from :func:`bayespig.infer`,
+or its netCDF file) or measurements (a :class:`~bayespig.data.MeasurementSet` or a
+measurement file, inferred first) and writes into ``out_dir``:
+
+``report.html``
+    Self-contained page, figures embedded as base64 PNG (opens offline).
+``report.md`` and ``figures/*.png``
+    The Markdown twin with its figures as files.
+``summary.csv``
+    One row per wavelength: posterior mean, sd, median and 5/25/75/95 % quantiles of every
+    parameter, correlation of ``a`` with ``log tau``, point fit, ESS, R-hat, flags.
+``summary.json``
+    The same numbers plus colour, fit quality, predicted films, diagnostics and provenance.
+``posterior.nc``
+    The posterior itself (netCDF), so the report's numbers can be recomputed.
+
+Every file is written into a temporary directory inside ``out_dir`` first and moved into
+place with :func:`os.replace` once all of them exist: an error leaves no half-written file.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as _dt
+import io
+import json
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import colorimetry
+from . import document as doc
+from . import figures as figs
+from . import quantities as q
+
+__all__ = ["ReportResult", "load_posterior", "write_report"]
+
+#: Wavelengths [nm] near which corner plots are drawn by default.
+CORNER_WAVELENGTHS_NM = (450.0, 550.0, 650.0)
+#: Draws used for colour and predictions of unmeasured films (evenly thinned).
+MAX_COLOUR_DRAWS = 400
+#: Draws shown in corner plots and the ravine figure.
+MAX_PLOT_DRAWS = 4000
+_NETCDF_SUFFIXES = (".nc", ".nc4", ".netcdf", ".h5")
+
+
+@dataclass
+class ReportResult:
+    """What :func:`write_report` wrote.
+
+    Attributes
+    ----------
+    out_dir : pathlib.Path
+    files : dict
+        Role (``"html"``, ``"markdown"``, ``"csv"``, ``"json"``, ``"netcdf"``, ``"figures"``)
+        -> path (a list of paths for figures).
+    summary : dict
+        The content of ``summary.json``.
+    seconds : float
+        Time to compute and write the report (without inference) [s].
+    """
+
+    out_dir: Path
+    files: dict
+    summary: dict
+    seconds: float
+    idata: object = field(default=None, repr=False)
+
+
+# ------------------------------------------------------------------------------------------
+# inputs
+
+
+def _is_inference_data(obj):
+    return hasattr(obj, "posterior") and hasattr(obj, "groups")
+
+
+def _read_netcdf(path):
+    try:
+        from ..inference import load_inference
+    except ImportError:  # inference layer not installed: plain arviz
+        import arviz as az
+
+        return az.from_netcdf(path)
+    return load_inference(path)
+
+
+def load_posterior(source, *, measurements=None, infer_kwargs=None, progress=False):
+    """A posterior and its measurements from any accepted report input.
+
+    Parameters
+    ----------
+    source : InferenceData, MeasurementSet, str or os.PathLike
+        A posterior, its netCDF file (``.nc``), a measurement set or a measurement file
+        (read by :func:`bayespig.read_measurements` and inferred with :func:`bayespig.infer`).
+    measurements : MeasurementSet, str or os.PathLike, optional
+        The measurements of a given posterior (for thickness, concentration, a synthetic
+        truth and the pigment's name).
+    infer_kwargs : dict, optional
+        Passed to :func:`bayespig.infer` when measurements are given.
+    progress : bool
+        Progress bars while inferring.
+
+    Returns
+    -------
+    idata : arviz.InferenceData
+    measurements : MeasurementSet or None
+    inferred : bool
+        Whether the posterior was computed here.
+    """
+    from ..data import MeasurementSet, read_measurements
+
+    if isinstance(measurements, (str, os.PathLike)):
+        measurements = read_measurements(measurements)
+    if _is_inference_data(source):
+        return source, measurements, False
+    if isinstance(source, (str, os.PathLike)):
+        path = Path(source)
+        if not path.exists():
+            raise ValueError(f"{path}: no such file")
+        if path.suffix.lower() in _NETCDF_SUFFIXES:
+            try:
+                idata = _read_netcdf(path)
+            except (OSError, ValueError, KeyError) as error:
+                raise ValueError(f"{path}: not a bayespig posterior netCDF file ({error})") from None
+            if "posterior" not in idata.groups():
+                raise ValueError(f"{path}: the netCDF file has no posterior group")
+            return idata, measurements, False
+        source = read_measurements(path)
+    if isinstance(source, MeasurementSet):
+        from ..inference import infer
+
+        kwargs = {"progress": progress, **(infer_kwargs or {})}
+        return infer(source, **kwargs), source, True
+    raise ValueError("write_report needs an InferenceData, a netCDF posterior, a MeasurementSet "
+                     f"or a measurement file; got {type(source).__name__}")
+
+
+def _truth(measurements, problem):
+    """The synthetic truth recorded by :func:`bayespig.simulate`, or None."""
+    if measurements is None:
+        return None
+    meta = dict(measurements.metadata or {})
+    truth = meta.get("truth")
+    if not isinstance(truth, dict) or "a" not in truth:
+        return None
+    a = np.asarray(truth["a"], dtype=float)
+    taus = truth.get("tau") or {}
+    group = problem.groups[0] if problem.groups else None
+    tau = np.asarray(taus[group], dtype=float) if group in taus else None
+    if a.shape != problem.wavelength_nm.shape or (tau is not None and tau.shape != a.shape):
+        return None
+    return {"a": a, "tau": tau, "g": truth.get("g")}
+
+
+def _synthetic_label(measurements):
+    if measurements is None:
+        return None
+    meta = dict(measurements.metadata or {})
+    if meta.get("synthetic"):
+        return str(meta.get("synthetic")) if not isinstance(meta["synthetic"], bool) else "synthetic"
+    if meta.get("generator") == "bayespig.simulate":
+        return "simulated with bayespig.simulate"
+    return None
+
+
+# ------------------------------------------------------------------------------------------
+# helpers
+
+
+def _nearest_indices(wl, targets):
+    out = []
+    for t in targets:
+        i = int(np.argmin(np.abs(wl - t)))
+        if i not in out:
+            out.append(i)
+    return out
+
+
+def _fmt(x, digits=3):
+    if x is None or (isinstance(x, float) and not np.isfinite(x)):
+        return "n/a"
+    return f"{x:.{digits}g}"
+
+
+def _interval(bands, i, digits=3):
+    return (f"{_fmt(bands['median'][i], digits)} [{_fmt(bands['q05'][i], digits)}, "
+            f"{_fmt(bands['q95'][i], digits)}]")
+
+
+def _jsonable(value):
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        value = float(value)
+        return value if np.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
+
+
+def _correlation(a, log_tau):
+    """Pearson correlation of ``a`` and ``log tau`` per wavelength (draws on axis 0)."""
+    da = a - a.mean(axis=0)
+    dt = log_tau - log_tau.mean(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (da * dt).sum(axis=0) / np.sqrt((da * da).sum(axis=0) * (dt * dt).sum(axis=0))
+
+
+def _zoom_limits(draws, lower, upper, log=False):
+    x = np.log(draws) if log else draws
+    lo, hi = np.quantile(x, [0.002, 0.998])
+    pad = max(0.6 * (hi - lo), 1e-3 if not log else 0.02)
+    lo, hi = lo - pad, hi + pad
+    if log:
+        return max(np.exp(lo), lower), min(np.exp(hi), upper)
+    return max(lo, lower), min(hi, upper)
+
+
+def _extinction(measurements, problem, tau_draws):
+    """Extinction per film group with known thickness (and concentration), or {}."""
+    if measurements is None or not problem.groups:
+        return {}
+    group = problem.groups[0]
+    films = measurements.film_groups.get(group, ())
+    thickness = next((f.thickness_um for f in films if f.thickness_um is not None), None)
+    if thickness is None:
+        return {}
+    concentration = next((f.concentration for f in films if f.concentration is not None), None)
+    values = q.extinction(tau_draws, thickness, concentration)
+    return {"group": group, "thickness_um": thickness, "concentration": concentration,
+            **{k: q.parameter_bands(v) for k, v in values.items()}}
+
+
+# ------------------------------------------------------------------------------------------
+# the report
+
+
+def write_report(posterior_or_measurements, out_dir, *, measurements=None,
+                 observer=colorimetry.DEFAULT_OBSERVER, illuminant=colorimetry.DEFAULT_ILLUMINANT,
+                 title=None, corner_wavelengths=CORNER_WAVELENGTHS_NM, ravine_wavelength=None,
+                 films=None, max_colour_draws=MAX_COLOUR_DRAWS, infer_kwargs=None,
+                 progress=False, save_posterior=True):
+    """Write the uncertainty report of one pigment.
+
+    Parameters
+    ----------
+    posterior_or_measurements : InferenceData, MeasurementSet, str or os.PathLike
+        A posterior from :func:`bayespig.infer` (or its netCDF file), or measurements
+        (a set or a file), which are inferred first with :func:`bayespig.infer`.
+    out_dir : str or os.PathLike
+        Directory to write into (created if missing; files of an earlier report are replaced).
+    measurements : MeasurementSet, str or os.PathLike, optional
+        The measurements of a given posterior: film thickness and concentration (for the
+        extinction cross-section, appendix A2), a synthetic truth, the name of the source.
+    observer, illuminant : str
+        Colorimetric conditions (colour-science names); default CIE 1964 10° and D65.
+    title : str, optional
+        Report title (default from the measurement source).
+    corner_wavelengths : sequence of float
+        Corner plots at the wavelengths nearest these [nm].
+    ravine_wavelength : float, optional
+        Wavelength of the ravine figure [nm]; default the one with the widest ``log tau``
+        posterior (where the landscape matters most).
+    films : sequence of FilmDesign, optional
+        Films to predict the colour of (default
+        :func:`~bayespig.report.quantities.default_unmeasured_films`).
+    max_colour_draws : int
+        Posterior draws used for colour statistics and predicted films.
+    infer_kwargs : dict, optional
+        Passed to :func:`bayespig.infer` when inferring here.
+    progress : bool
+        Show progress while inferring and writing.
+    save_posterior : bool
+        Also write ``posterior.nc``.
+
+    Returns
+    -------
+    ReportResult
+
+    Raises
+    ------
+    ValueError
+        For inputs that are not a posterior or measurements, or bad colorimetric names.
+    """
+    if observer not in colorimetry.OBSERVERS:
+        raise ValueError(f"observer={observer!r} is not known to colour-science; valid names: "
+                         + ", ".join(colorimetry.OBSERVERS))
+    if illuminant not in colorimetry.ILLUMINANTS:
+        raise ValueError(f"illuminant={illuminant!r} is not known to colour-science; valid names: "
+                         + ", ".join(colorimetry.ILLUMINANTS))
+    idata, measurements, _ = load_posterior(posterior_or_measurements, measurements=measurements,
+                                            infer_kwargs=infer_kwargs, progress=progress)
+    netcdf_source = None
+    if isinstance(posterior_or_measurements, (str, os.PathLike)) and \
+            Path(posterior_or_measurements).suffix.lower() in _NETCDF_SUFFIXES:
+        netcdf_source = Path(posterior_or_measurements)
+    start = time.perf_counter()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    content = _build(idata, measurements, observer=observer, illuminant=illuminant, title=title,
+                     corner_wavelengths=corner_wavelengths, ravine_wavelength=ravine_wavelength,
+                     films=films, max_colour_draws=max_colour_draws, progress=progress)
+    files = _write_files(out_dir, content, (netcdf_source or idata) if save_posterior else None)
+    seconds = time.perf_counter() - start
+    return ReportResult(out_dir, files, content["summary"], seconds, idata)
+
+
+def _say(progress, message):
+    if progress:
+        print(f"  report: {message}", flush=True)
+
+
+def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengths,
+           ravine_wavelength, films, max_colour_draws, progress):
+    """Every number, figure and block of the report (nothing written yet)."""
+    if "tau" not in idata.posterior:
+        raise ValueError("the posterior has no tau: every film is opaque, so only a is inferred; "
+                         "the report needs at least one film that does not hide its substrate")
+    wl = q.wavelengths(idata)
+    problem = q.problem_from_inference(idata)
+    priors = q.priors_from_inference(idata)
+    prov = q.provenance(idata)
+    truth = _truth(measurements, problem)
+    synthetic = _synthetic_label(measurements)
+    source = getattr(measurements, "source", None) if measurements is not None else None
+    title = title or f"bayespig uncertainty report: {Path(str(source)).name if source else 'pigment'}"
+    blocks, pngs, summary = [], {}, {}
+
+    def add_figure(name, fig, caption):
+        pngs[name] = figs.to_png(fig)
+        blocks.append(doc.figure(name, caption))
+
+    # ---- parameters
+    _say(progress, "parameters")
+    a = q.posterior_draws(idata, "a")
+    tau = q.posterior_draws(idata, "tau")
+    bands = {"a": q.parameter_bands(a), "tau": q.parameter_bands(tau)}
+    groups = list(problem.groups)
+    if "tau_group" in idata.posterior and len(groups) > 1:
+        tau_groups = q.posterior_draws(idata, "tau_group")
+        for k, group in enumerate(groups):
+            bands[f"tau[{group}]"] = q.parameter_bands(tau_groups[..., k])
+    for name in ("g", "eps"):
+        if name in idata.posterior:
+            draws = q.posterior_draws(idata, name)
+            bands[name] = q.parameter_bands(draws.reshape(draws.shape[0], wl.size, -1)[..., 0])
+    corr = _correlation(a, np.log(tau))
+    constant = getattr(idata, "constant_data", None)
+    point = {name: (np.asarray(constant[f"point_{name}"].values, dtype=float)
+                    if constant is not None and f"point_{name}" in constant else np.full(wl.size, np.nan))
+             for name in ("a", "tau")}
+    extinction = _extinction(measurements, problem, tau)
+    diag = q.diagnostics(idata, priors=priors)
+
+    blocks.append(doc.heading(title, 1))
+    intro = (f"Posterior, per wavelength, of the relative absorption a = 1 - albedo and the optical "
+             f"thickness tau{' and the phase parameter g' if 'g' in bands else ''}: "
+             f"{wl.size} wavelengths {wl[0]:g}-{wl[-1]:g} nm, from {len(problem.films)} measured "
+             f"film spectra ({problem.n_values} values per wavelength), {prov.get('method', problem.method)}.")
+    blocks.append(doc.paragraph(intro))
+    if synthetic:
+        blocks.append(doc.paragraph(f"SYNTHETIC DATA - {synthetic}: the measurements were simulated; "
+                                    "dashed lines and crosses mark the true values."))
+    film_lines = []
+    for f in problem.films:
+        substrate = "opaque" if f.opaque else f"r_s median {_fmt(float(np.median(f.r_s)))}"
+        geometry = ", ".join(f.instrument.labels) if f.instrument else "specular transmittance"
+        film_lines.append(f"{f.name} ({substrate}; {geometry})")
+    eps_text = ("eps inferred" if "eps" in bands
+                else f"eps known: {_fmt(float(np.nanmedian(q.eps_per_value(idata))))}")
+    blocks.append(doc.bullets([
+        f"Source: {source or 'posterior given directly'}",
+        "Samples: " + ", ".join(film_lines),
+        f"Noise model: x_obs = x_model (1 + eps xi), paper eq. 7; {eps_text}",
+        f"Chains x draws: {diag['n_chains']} x {diag['n_draws']}; seed {prov.get('seed', 'n/a')}",
+    ]))
+
+    blocks.append(doc.heading("At a glance"))
+    glance_idx = _nearest_indices(wl, CORNER_WAVELENGTHS_NM)
+    rows = []
+    for i in glance_idx:
+        row = [f"{wl[i]:g}", _interval(bands["a"], i), _interval(bands["tau"], i), _fmt(corr[i], 2)]
+        if "g" in bands:
+            row.append(_interval(bands["g"], i))
+        rows.append(row)
+    header = ["wavelength [nm]", "a median [90 %]", "tau median [90 %]", "corr(a, log tau)"]
+    if "g" in bands:
+        header.append("g median [90 %]")
+    blocks.append(doc.table(header, rows))
+    flagged = [f for f in diag["flags"] if f["wavelength_nm"] is not None]
+    blocks.append(doc.paragraph(
+        f"Diagnostics: {len(flagged)} of {wl.size} wavelengths flagged"
+        + (" (see Diagnostics below)." if flagged else " - every wavelength converged "
+           f"(R-hat <= {diag['rhat_max']:g}, bulk ESS >= {diag['ess_min']:g}).")))
+    colour_slot = len(blocks)  # the colour verdict goes here once computed
+
+    blocks.append(doc.heading("Optical properties"))
+    panels = [{"bands": bands["a"], "label": "a = 1 - albedo", "point": point["a"],
+               "truth": truth["a"] if truth else None},
+              {"bands": bands["tau"], "label": "optical thickness tau", "point": point["tau"],
+               "truth": truth["tau"] if truth else None, "log": True}]
+    for group in groups[1:]:
+        panels.append({"bands": bands[f"tau[{group}]"], "label": f"tau [{group}]", "log": True})
+    if "g" in bands:
+        g_truth = truth.get("g") if truth else None
+        panels.append({"bands": bands["g"], "label": "HG parameter g",
+                       "truth": None if g_truth is None else np.full(wl.size, float(g_truth))})
+    if "eps" in bands:
+        panels.append({"bands": bands["eps"], "label": "relative error eps", "log": True})
+    add_figure("parameters", figs.parameter_figure(wl, panels),
+               "Posterior median (line) with 50 % and 90 % central intervals (bands); + point fit"
+               + (" (at g = 0, the start of the sampler)" if "g" in bands else "")
+               + ("; dashed: truth of the synthetic pigment" if truth else "") + ". tau is the optical "
+               f"thickness of film group '{groups[0] if groups else 'n/a'}'.")
+    if extinction:
+        unit = "1/um"
+        text = (f"Film group '{extinction['group']}' has a known dry thickness H = "
+                f"{extinction['thickness_um']:g} um, so k_ext = tau / H [{unit}]")
+        if "sigma_ext" in extinction:
+            text += (f"; with concentration D = {extinction['concentration']:g} (appendix A2, up to "
+                     "the particle-mass scale) the extinction cross-section sigma_ext = tau / (H D).")
+        blocks.append(doc.paragraph(text + "."))
+        ext_panels = [{"bands": extinction["k_ext"], "label": "k_ext [1/um]", "log": True}]
+        if "sigma_ext" in extinction:
+            ext_panels.append({"bands": extinction["sigma_ext"], "label": "sigma_ext [1/um per unit D]",
+                               "log": True})
+        add_figure("extinction", figs.parameter_figure(wl, ext_panels),
+                   "Extinction coefficient (and cross-section) with 50 % and 90 % intervals (appendix A2).")
+    header = ["wavelength [nm]", "a median", "a 5 %", "a 95 %", "tau median", "tau 5 %", "tau 95 %",
+              "corr(a, log tau)", "point a", "point tau"]
+    rows = [[f"{w:g}", _fmt(bands["a"]["median"][i]), _fmt(bands["a"]["q05"][i]), _fmt(bands["a"]["q95"][i]),
+             _fmt(bands["tau"]["median"][i]), _fmt(bands["tau"]["q05"][i]), _fmt(bands["tau"]["q95"][i]),
+             _fmt(corr[i], 2), _fmt(point["a"][i]), _fmt(point["tau"][i])] for i, w in enumerate(wl)]
+    blocks.append(doc.table(header, rows))
+
+    # ---- posterior shape: corner plots and the ravine
+    _say(progress, "corner plots and ravine")
+    blocks.append(doc.heading("Posterior shape"))
+    blocks.append(doc.paragraph(
+        "Corner plots show the joint posterior at single wavelengths: a long, tilted cloud means "
+        "the data constrain a combination of parameters better than each one - the paper's "
+        "'ravine'. Blue lines: point fit (least squares, the paper's procedure); contours at "
+        "50 % and 90 %; titles give the median and the 5 %/95 % quantiles."))
+    a_plot = q.posterior_draws(idata, "a", MAX_PLOT_DRAWS)
+    tau_plot = q.posterior_draws(idata, "tau", MAX_PLOT_DRAWS)
+    columns = [(a_plot, "a"), (np.log10(tau_plot), "log10 tau")]
+    if len(groups) > 1:
+        tg = q.posterior_draws(idata, "tau_group", MAX_PLOT_DRAWS)
+        columns += [(np.log10(tg[..., k]), f"log10 tau[{g}]") for k, g in enumerate(groups) if k > 0]
+    for name in ("g", "eps"):
+        if name in idata.posterior:
+            d = q.posterior_draws(idata, name, MAX_PLOT_DRAWS)
+            d = d.reshape(d.shape[0], wl.size, -1)[..., 0]
+            columns.append((np.log10(d) if name == "eps" else d, "log10 eps" if name == "eps" else "g"))
+    for i in _nearest_indices(wl, corner_wavelengths or ()):
+        samples = np.column_stack([c[0][:, i] for c in columns])
+        labels = [c[1] for c in columns]
+        pt = [point["a"][i], np.log10(point["tau"][i])] + [None] * (len(columns) - 2)
+        tr = None
+        if truth and truth["tau"] is not None:
+            tr = [truth["a"][i], np.log10(truth["tau"][i])] + [None] * (len(columns) - 2)
+            if "g" in labels and truth.get("g") is not None:
+                tr[labels.index("g")] = float(truth["g"])
+        add_figure(f"corner_{wl[i]:g}nm",
+                   figs.corner_figure(samples, labels, point=pt, truth=tr, title=f"{wl[i]:g} nm"),
+                   f"Joint posterior at {wl[i]:g} nm" + (" (dashed black: truth)" if tr else "") + ".")
+
+    sd_log_tau = np.log(tau).std(axis=0)
+    r_index = (int(np.argmax(sd_log_tau)) if ravine_wavelength is None
+               else _nearest_indices(wl, [ravine_wavelength])[0])
+    from ..likelihood import ForwardModel
+
+    model = ForwardModel(problem, "free" if "g" in idata.posterior else "isotropic")
+    wide = q.ravine(idata, r_index, problem=problem, model=model, n_grid=151)
+    zoom = q.ravine(idata, r_index, problem=problem, model=model, n_grid=121,
+                    a_limits=_zoom_limits(a_plot[:, r_index], *priors.a_range),
+                    tau_limits=_zoom_limits(tau_plot[:, r_index], *priors.tau_range, log=True))
+    held = ", ".join(f"{k} = {v:.3g}" for k, v in wide.held.items())
+    blocks.append(doc.paragraph(
+        "The ravine: the log-likelihood (eq. 7) over (a, tau) at one wavelength, with posterior "
+        "draws over it. Where the measurements cannot separate absorption from thickness the "
+        "high-likelihood region is a long curved valley and the posterior follows it; a compact "
+        "island means both are identified. White contours: 1, 2, 3 sigma of a 2-D Gaussian "
+        "(Delta log L = -1.15, -3.09, -5.91)."
+        + (f" Held at posterior medians: {held}." if held else "")))
+    rt = (truth["a"][r_index], truth["tau"][r_index]) if truth and truth["tau"] is not None else None
+    add_figure("ravine", figs.ravine_figure(wide, zoom, a_plot[:, r_index], tau_plot[:, r_index],
+                                            point=(point["a"][r_index], point["tau"][r_index]), truth=rt),
+               f"Log-likelihood landscape at {wl[r_index]:g} nm"
+               + (" (the widest tau posterior of the spectrum)" if ravine_wavelength is None else "")
+               + "; left the whole prior box, right a zoom on the posterior.")
+
+    # ---- fit quality
+    _say(progress, "fit quality")
+    blocks.append(doc.heading("Fit quality"))
+    residuals = q.residuals_in_eps(idata, max_draws=max_colour_draws)
+    samples_measured = list(dict.fromkeys(r["sample"] for r in residuals["rows"]))
+    add_figure("fit", figs.fit_figure(wl, residuals, samples_measured),
+               "Measured values (dots) and the posterior predictive (noise-free model) mean and 90 % "
+               "band (lines), per sample and geometry.")
+    add_figure("residuals", figs.residual_figure(wl, residuals, samples_measured),
+               "Residuals in units of the relative error eps: (measured - predicted) / (eps predicted). "
+               "Under the noise model (eq. 7) they scatter like a standard normal; grey bands at "
+               "+-1, 2, 3.")
+    fit_rows = []
+    for k, r in enumerate(residuals["rows"]):
+        z = residuals["z"][:, k]
+        fit_rows.append({"sample": r["sample"], "channel": r["channel"],
+                         "rms_z": float(np.sqrt(np.nanmean(z * z))), "max_abs_z": float(np.nanmax(np.abs(z)))})
+    blocks.append(doc.table(["sample", "geometry", "rms residual [eps]", "max |residual| [eps]"],
+                            [[f["sample"], f["channel"], _fmt(f["rms_z"]), _fmt(f["max_abs_z"])]
+                             for f in fit_rows]))
+
+    # ---- colour
+    _say(progress, "colour")
+    blocks.append(doc.heading("Colour"))
+    available, why = q.colour_available(wl)
+    colour_summary = {"available": available}
+    if not available:
+        blocks.append(doc.paragraph(f"No colour: {why}."))
+        colour_summary["reason"] = why
+    else:
+        conditions = colorimetry.colorimetric_metadata(wl, observer=observer, illuminant=illuminant)
+        colour_summary["conditions"] = conditions
+        blocks.append(doc.paragraph(
+            f"CIELAB under {conditions['illuminant']} for the {conditions['observer']} "
+            f"(tristimulus weights: {conditions['method']}, colour-science "
+            f"{conditions['colour_science_version']}); the white is the perfect reflecting "
+            "diffuser. A BRDF f [1/sr] is taken as the reflectance factor pi f at its geometry "
+            "(the surface's specular reflection is not part of the model). Delta E00 is CIEDE2000. "
+            f"Spread: the {int(q.SPREAD_QUANTILE * 100)}th percentile of Delta E00 between the colour "
+            "of posterior draws and the posterior-mean colour - below "
+            f"{q.COLOUR_MATCH_DELTA_E:g} the pigment data are good enough for colour matching."))
+        measured = q.measured_colour(idata, observer=observer, illuminant=illuminant,
+                                     max_draws=max_colour_draws, residuals=residuals)
+        blocks.append(doc.heading("Measured samples", 3))
+        blocks.append(doc.table(
+            ["sample", "geometry", "L* a* b* measured", "L* a* b* predicted", "dE00 meas-pred",
+             "dE00 spread (95 %)"],
+            [[m["sample"], m["channel"], _lab(m["Lab_measured"]), _lab(m["Lab_predicted"]),
+              _fmt(m["dE00_measured_predicted"], 2), _fmt(m["dE00_spread"], 2)] for m in measured]))
+        add_figure("colour_measured", figs.swatch_figure(
+            [{"label": f"{m['sample']} {m['channel']}", "colours": [m["sRGB_measured"], m["sRGB_predicted"]],
+              "text": f"dE00 {m['dE00_measured_predicted']:.2f}, spread {m['dE00_spread']:.2f}"}
+             for m in measured], title="measured (left) and predicted (right), sRGB for display"),
+            "Colour of every measured sample and geometry: measured and predicted (posterior mean).")
+        films = list(films) if films is not None else q.default_unmeasured_films(problem)
+        predicted = q.film_colour(idata, films, observer=observer, illuminant=illuminant,
+                                  max_draws=max_colour_draws)
+        blocks.append(doc.heading("Predicted films", 3))
+        instrument_labels = list(dict.fromkeys(p["channel"] for p in predicted))
+        blocks.append(doc.paragraph(
+            "Colour of films made with this pigment that were not measured, predicted from the "
+            f"posterior through the forward model at the geometries {', '.join(instrument_labels)}; "
+            "'x tau' scales the optical thickness of film group "
+            f"'{groups[0] if groups else 'n/a'}' (a thicker or thinner drawdown at the same "
+            "concentration), black and white substrates have r_s = 0.01 and 0.95."))
+        blocks.append(doc.table(
+            ["film", "geometry", "L* a* b*", "dE00 spread (95 %)"],
+            [[p["film"] + (" (measured)" if p["measured"] else ""), p["channel"], _lab(p["Lab"]),
+              _fmt(p["dE00_spread"], 2)] for p in predicted]))
+        per_film = {}
+        for p in predicted:
+            per_film.setdefault(p["film"], []).append(p)
+        add_figure("colour_predicted", figs.swatch_figure(
+            [{"label": film, "colours": [p["sRGB"] for p in ps],
+              "text": f"max spread {max(p['dE00_spread'] for p in ps):.2f}"} for film, ps in per_film.items()],
+            title="predicted films, one swatch per geometry: " + ", ".join(instrument_labels)),
+            "Predicted colour of unmeasured films (posterior mean), one swatch per geometry.")
+        spreads = [m["dE00_spread"] for m in measured] + [p["dE00_spread"] for p in predicted]
+        worst_measured = max((m["dE00_spread"] for m in measured), default=np.nan)
+        verdict = bool(worst_measured < q.COLOUR_MATCH_DELTA_E)
+        colour_summary.update({"measured": measured, "predicted_films": predicted,
+                               "max_dE00_spread_measured": worst_measured,
+                               "max_dE00_spread_all": max(spreads) if spreads else None,
+                               "good_enough_for_colour_matching": verdict})
+        blocks.insert(colour_slot, doc.paragraph(
+            f"Colour: the posterior spread of the predicted colour of the measured samples is at most "
+            f"Delta E00 = {worst_measured:.2f} (95th percentile) - "
+            + ("good enough for colour matching (< 1)." if verdict else
+               "NOT good enough for colour matching (>= 1): measure more samples or geometries.")))
+
+    # ---- diagnostics and provenance
+    _say(progress, "diagnostics")
+    blocks.append(doc.heading("Diagnostics"))
+    add_figure("diagnostics", figs.diagnostics_figure(wl, diag),
+               f"Bulk effective sample size and rank-normalised R-hat (arviz) per wavelength; "
+               f"flags below ESS {diag['ess_min']:g} or above R-hat {diag['rhat_max']:g}.")
+    if diag["flags"]:
+        blocks.append(doc.bullets([(f"{f['wavelength_nm']:g} nm: " if f["wavelength_nm"] is not None else "")
+                                   + "; ".join(f["reasons"]) for f in diag["flags"]]))
+    else:
+        blocks.append(doc.paragraph("No wavelength flagged."))
+
+    blocks.append(doc.heading("Priors, settings and provenance"))
+    blocks.append(doc.bullets([f"{k}: {v}" for k, v in priors.describe().items()]))
+    prov_text = json.dumps(_jsonable(prov), indent=2, sort_keys=True, default=str)
+    blocks.append(doc.preformatted(prov_text))
+    created = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+    from .. import __version__
+
+    blocks.append(doc.paragraph(f"Report written {created} by bayespig {__version__}."))
+
+    summary = {
+        "title": title, "synthetic": synthetic, "created": created, "source": str(source) if source else None,
+        "wavelength_nm": wl, "method": prov.get("method", problem.method),
+        "parameters": bands, "correlation_a_log_tau": corr, "point_fit": point,
+        "truth": truth, "extinction": extinction,
+        "diagnostics": {k: diag[k] for k in ("ess", "rhat", "flags", "n_chains", "n_draws", "rhat_max", "ess_min")},
+        "fit_quality": fit_rows, "colour": colour_summary, "priors": priors.describe(),
+        "ravine_wavelength_nm": float(wl[r_index]), "provenance": prov,
+    }
+    csv_text = _summary_csv(wl, bands, corr, point, diag, extinction)
+    return {"blocks": blocks, "figures": pngs, "summary": _jsonable(summary), "csv": csv_text,
+            "title": title}
+
+
+def _lab(lab):
+    return " ".join(f"{v:.2f}" for v in np.asarray(lab).ravel())
+
+
+def _summary_csv(wl, bands, corr, point, diag, extinction):
+    columns = {"wavelength_nm": wl}
+    for name, b in bands.items():
+        for stat in ("mean", "sd", "median", "q05", "q25", "q75", "q95"):
+            columns[f"{name}_{stat}"] = b[stat]
+    for name in ("k_ext", "sigma_ext"):
+        if name in extinction:
+            for stat in ("mean", "sd", "median", "q05", "q95"):
+                columns[f"{name}_{stat}"] = extinction[name][stat]
+    columns["corr_a_log_tau"] = corr
+    columns["point_a"] = point["a"]
+    columns["point_tau"] = point["tau"]
+    for name in diag["ess"]:
+        columns[f"ess_bulk_{name}"] = diag["ess"][name]
+        columns[f"rhat_{name}"] = diag["rhat"][name]
+    flagged = {f["wavelength_nm"]: "; ".join(f["reasons"]) for f in diag["flags"]}
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(list(columns) + ["flags"])
+    for i, w in enumerate(wl):
+        writer.writerow([repr(float(columns[c][i])) for c in columns] + [flagged.get(float(w), "")])
+    return buffer.getvalue()
+
+
+def _write_files(out_dir, content, idata):
+    """Write everything into a temporary directory in ``out_dir``, then move it into place."""
+    tmp = Path(tempfile.mkdtemp(prefix=".report-", dir=out_dir))
+    try:
+        (tmp / "figures").mkdir()
+        names = {}
+        for name, png in content["figures"].items():
+            (tmp / "figures" / f"{name}.png").write_bytes(png)
+            names[name] = f"figures/{name}.png"
+        (tmp / "summary.csv").write_text(content["csv"], encoding="utf-8")
+        (tmp / "summary.json").write_text(
+            json.dumps(content["summary"], indent=1, allow_nan=False, default=str) + "\n", encoding="utf-8")
+        (tmp / "report.md").write_text(doc.to_markdown(content["blocks"]), encoding="utf-8")
+        (tmp / "report.html").write_text(doc.to_html(content["blocks"], content["figures"], content["title"]),
+                                         encoding="utf-8")
+        if idata is not None:
+            _save_netcdf(idata, tmp / "posterior.nc")
+        # everything exists: move into place (figures first, the pages last)
+        (out_dir / "figures").mkdir(exist_ok=True)
+        files = {"figures": []}
+        for name, relative in names.items():
+            os.replace(tmp / relative, out_dir / relative)
+            files["figures"].append(out_dir / relative)
+        order = [("netcdf", "posterior.nc"), ("csv", "summary.csv"), ("json", "summary.json"),
+                 ("markdown", "report.md"), ("html", "report.html")]
+        for role, name in order:
+            if (tmp / name).exists():
+                os.replace(tmp / name, out_dir / name)
+                files[role] = out_dir / name
+        return files
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _save_netcdf(idata, path):
+    """Write the posterior (or copy the netCDF file it was read from) to ``path``."""
+    if isinstance(idata, Path):
+        if idata.resolve() != path.resolve():
+            shutil.copyfile(idata, path)
+        return
+    try:
+        from ..inference import save_inference
+    except ImportError:
+        idata.to_netcdf(str(path))
+        return
+    save_inference(idata, path)

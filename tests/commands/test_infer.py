@@ -1,0 +1,57 @@
+"""``bayespig infer``: what it writes and prints (through its own argparse registration)."""
+
+import argparse
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bayespig.commands.infer import add_infer_parser
+from bayespig.data import simulate_to_csv
+from bayespig.inference import load_inference
+
+
+def run(argv):
+    parser = argparse.ArgumentParser(prog="bayespig")
+    add_infer_parser(parser.add_subparsers())
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+def test_infer_writes_posterior_and_summary(tmp_path, capsys):
+    data = tmp_path / "film.csv"
+    simulate_to_csv(data, a=0.1, tau=1.0, design="method4", wavelengths=[500.0, 600.0], seed=3)
+    out = tmp_path / "out"
+    assert run(["infer", str(data), "--method", "4", "--out", str(out), "--seed", "2",
+                "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    assert "method4" in printed and "a_mean" in printed and "posterior.nc" in printed
+    idata = load_inference(out / "posterior.nc")
+    assert idata.posterior.attrs["seed"] == 2 and idata.posterior.attrs["method"] == "method4"
+    summary = pd.read_csv(out / "summary.csv", index_col="wavelength")
+    assert list(summary.index) == [500.0, 600.0]
+    np.testing.assert_allclose(summary["a_mean"], idata.posterior["a"].mean(("chain", "draw")), rtol=1e-5)
+    assert sorted(p.name for p in out.iterdir()) == ["posterior.nc", "summary.csv"]
+
+
+@pytest.mark.parametrize("eps", ["-1", "abc", "0"])
+def test_bad_eps_is_a_clear_error(tmp_path, eps):
+    data = tmp_path / "film.csv"
+    simulate_to_csv(data, a=0.1, tau=1.0, design="method4", wavelengths=[500.0], seed=3)
+    with pytest.raises(ValueError, match="--eps"):
+        run(["infer", str(data), "--out", str(tmp_path / "out"), "--eps", eps])
+    assert not (tmp_path / "out").exists()
+
+
+def test_missing_file_writes_nothing(tmp_path):
+    with pytest.raises(ValueError, match="no such file"):
+        run(["infer", str(tmp_path / "nothing.csv"), "--out", str(tmp_path / "out")])
+    assert not (tmp_path / "out").exists()
+
+
+def test_unsupported_method_is_a_clear_error(tmp_path):
+    data = tmp_path / "film.csv"
+    simulate_to_csv(data, a=0.1, tau=1.0, design="method3", wavelengths=[500.0], seed=3)
+    with pytest.raises(ValueError, match="method4"):
+        run(["infer", str(data), "--method", "4", "--out", str(tmp_path / "out"), "--no-progress"])
+    assert not (tmp_path / "out").exists()

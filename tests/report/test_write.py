@@ -1,0 +1,137 @@
+"""write_report: inputs, atomic output, and the HTML page rendered by headless Chromium."""
+
+import os
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from bayespig.report import document, write_report
+from bayespig.report import write as write_module
+
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"  # Debian's package (.ci/run installs it)
+# Coloured pixels (max - min channel > COLOUR_SPREAD) in the screenshot: the page's own styling
+# is black, white and grey, so colour comes from rendered figures (bands, corner plots, the
+# ravine heat map). The top 4000 px hold the parameter figure, corner plots and the ravine;
+# measured on the demo report: about 1 % coloured with images, < 0.05 % without.
+COLOUR_SPREAD = 0.1
+MIN_COLOURED_FRACTION = 0.002
+MIN_COLOURED_RATIO = 5.0
+
+
+@pytest.mark.parametrize(("kwargs", "match"), [
+    ({"observer": "CIE 1931 3 Degree"}, "observer"),
+    ({"illuminant": "D66"}, "illuminant"),
+])
+def test_bad_colour_conditions_are_clear_errors(demo_idata, tmp_path, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        write_report(demo_idata, tmp_path / "out", **kwargs)
+    assert not (tmp_path / "out").exists()
+
+
+def test_bad_inputs_are_clear_errors(tmp_path):
+    with pytest.raises(ValueError, match="no such file"):
+        write_report(tmp_path / "missing.nc", tmp_path / "out")
+    with pytest.raises(ValueError, match="InferenceData"):
+        write_report(42, tmp_path / "out")
+    broken = tmp_path / "broken.nc"
+    broken.write_text("not netCDF")
+    with pytest.raises(ValueError, match="broken.nc"):
+        write_report(broken, tmp_path / "out")
+
+
+def test_an_error_while_writing_leaves_the_previous_report_intact(demo_dir, demo_idata, tmp_path,
+                                                                  monkeypatch):
+    out = tmp_path / "out"
+    shutil.copytree(demo_dir, out)
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    def fail(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(document, "to_html", fail)
+    with pytest.raises(RuntimeError, match="disk full"):
+        write_report(demo_idata, out)
+    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert after == before  # same files, same bytes, no temporary directory left
+
+
+def test_report_infers_first_when_given_measurements(tmp_path):
+    """A measurement file goes through bayespig.infer before the report (quick settings)."""
+    from bayespig.demo import QUICK_SETTINGS, demo_measurements
+    from bayespig.inference import InferenceSettings
+
+    path = tmp_path / "film.csv"
+    demo_measurements(seed=4, wavelength_nm=np.arange(400.0, 701.0, 60.0)).to_csv(path)
+    settings = InferenceSettings(**QUICK_SETTINGS)
+    result = write_report(path, tmp_path / "out", infer_kwargs={"settings": settings, "seed": 5},
+                          corner_wavelengths=())
+    assert result.files["html"].is_file() and result.files["netcdf"].is_file()
+    assert result.summary["provenance"]["seed"] == 5
+    assert result.summary["source"].endswith("film.csv")
+
+
+def _screenshot(html, png, width=1200, height=4000):
+    command = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+               f"--screenshot={png}", f"--window-size={width},{height}", html.as_uri()]
+    env = dict(os.environ, HOME=str(png.parent))  # chromium wants a writable profile home
+    return subprocess.run(command, check=False, capture_output=True, text=True, timeout=120,
+                          env=env)
+
+
+@pytest.mark.skipif(not os.path.exists(CHROMIUM),
+                    reason="Chromium is not installed (apt-get install -y chromium; .ci/run does)")
+def test_chromium_renders_the_figures(demo_dir, tmp_path):
+    import matplotlib.image
+
+    shot = tmp_path / "report.png"
+    run = _screenshot(demo_dir / "report.html", shot)
+    assert run.returncode == 0 and shot.is_file(), run.stderr[-2000:]
+    image = matplotlib.image.imread(shot)[..., :3]
+    coloured = (image.max(axis=-1) - image.min(axis=-1)) > COLOUR_SPREAD
+    # the same page without its images: only text and tables, (almost) no colour
+    bare = tmp_path / "bare.html"
+    text = (demo_dir / "report.html").read_text()
+    bare.write_text(_strip_images(text))
+    run = _screenshot(bare, tmp_path / "bare.png")
+    assert run.returncode == 0, run.stderr[-2000:]
+    bare_image = matplotlib.image.imread(tmp_path / "bare.png")[..., :3]
+    bare_coloured = (bare_image.max(axis=-1) - bare_image.min(axis=-1)) > COLOUR_SPREAD
+    assert coloured.mean() > MIN_COLOURED_FRACTION
+    assert coloured.mean() > MIN_COLOURED_RATIO * bare_coloured.mean()
+
+
+def _strip_images(html):
+    """The page with every embedded image removed."""
+    return re.sub(r'<img src="data:image/png;base64,[^"]*"', '<img src=""', html)
+
+
+def test_write_module_exports():
+    assert write_module.write_report is write_report
+
+
+def test_method1_with_inferred_eps(tmp_path):
+    """Opaque film + film on glass (specular transmittance), eps a parameter: every section."""
+    import bayespig
+    from bayespig.demo import QUICK_SETTINGS
+    from bayespig.inference import InferenceSettings, infer
+
+    wl = np.arange(400.0, 701.0, 60.0)  # 6 wavelengths: the fewest colorimetry accepts
+    measurements = bayespig.simulate(a=0.1, tau=1.0, design="method1", wavelengths=wl, seed=2)
+    idata = infer(measurements, method="method1", eps="infer", seed=2, progress=False,
+                  settings=InferenceSettings(**QUICK_SETTINGS))
+    result = write_report(idata, tmp_path / "m1", measurements=measurements,
+                          corner_wavelengths=(580.0,), save_posterior=False)
+    assert "netcdf" not in result.files and not (tmp_path / "m1" / "posterior.nc").exists()
+    summary = result.summary
+    assert "eps" in summary["parameters"]
+    kinds = {(r["sample"], r["channel"]) for r in summary["fit_quality"]}
+    assert ("on_glass", "specular_transmittance") in kinds
+    # colour only for reflectances; the unmeasured films include the film on black and white
+    assert all(m["sample"] == "opaque" for m in summary["colour"]["measured"])
+    films = {p["film"] for p in summary["colour"]["predicted_films"]}
+    assert {"1 x tau on black", "1 x tau on white"} <= films
+    assert any(p["measured"] for p in summary["colour"]["predicted_films"])  # opaque was measured
+    assert (tmp_path / "m1" / "figures" / "corner_580nm.png").is_file()

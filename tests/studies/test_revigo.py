@@ -1,0 +1,115 @@
+"""Revigo study (bayespig.studies.revigo): series, SCE/SCI evidence, report; real data when present."""
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bayespig.commands.revigo import add_revigo_parser, run_revigo
+from bayespig.data import MeasurementError
+from bayespig.studies.revigo import (
+    FilmFit,
+    RevigoStudy,
+    default_revigo_path,
+    revigo_report,
+    revigo_study,
+    specular_evidence,
+    tint_series,
+    write_revigo_report,
+)
+from bayespig.studies.tints import TintPrediction
+
+REVIGO = default_revigo_path()
+needs_revigo = pytest.mark.skipif(not (REVIGO / "revigo-mixture-specifications.txt").exists(),
+                                  reason=f"Revigo data not found at {REVIGO} (set BAYESPIG_REVIGO)")
+
+
+def _fit(film_id, mode, rms, below=0, inverted=False):
+    rms = np.asarray(rms, dtype=float)
+    return FilmFit(film_id, mode, rms, np.zeros_like(rms), np.ones_like(rms), below,
+                   np.full(rms.shape, inverted))
+
+
+@needs_revigo
+def test_tint_series_of_the_revigo_collection():
+    from bayespig.data.spectral_table import read_revigo
+
+    series = {s.series: s for s in tint_series(read_revigo(REVIGO))}
+    # 12 pigments have a masstone, a ~10/90 and a ~50/50 tint with zinc white (the mixture
+    # file); 15 (ChromeYellowOtero) has no 50/50 tint, 04F/13G (~1 %) are not 10/90 tints.
+    assert sorted(series) == ["01", "02", "03", "04", "05", "06", "09", "10", "11", "12", "13", "14"]
+    assert {s.white for s in series.values()} == {"07A"}
+    s13 = series["13"]
+    assert (s13.masstone, s13.tint_b, s13.tint_c) == ("13A", "13B", "13C")
+    assert s13.mass_fractions_b == pytest.approx((0.063, 0.937))
+    assert series["04"].tint_b == "04B"
+
+
+def test_specular_evidence_rules_out_sci_below_the_surface_reflection():
+    fits = {"excluded": {"x": _fit("x", "excluded", [0.0, 0.0])},
+            "included": {"x": _fit("x", "included", [0.0, 0.0], below=3)}}
+    evidence = specular_evidence(fits)
+    assert evidence["decision"] == "excluded"
+    assert "below" in evidence["reason"]
+    # without impossible values the better fit wins: log BF = (S_SCI - S_SCE) / (2 eps^2)
+    fits = {"excluded": {"x": _fit("x", "excluded", [0.02, 0.0])},
+            "included": {"x": _fit("x", "included", [0.0, 0.0])}}
+    evidence = specular_evidence(fits)
+    assert evidence["decision"] == "included"
+    assert evidence["log_bayes_factor"] == pytest.approx(-(2 * 0.02**2) / (2 * 0.01**2))
+
+
+def _prediction(model, delta_E):
+    wl = np.array([400.0, 500.0])
+    return TintPrediction(model, wl, np.full((2, 2), 0.5), np.full((2, 2), 0.5), 1.0, np.zeros(2),
+                          np.ones(2), np.array([True, True]), np.asarray(delta_E, float), 0.0)
+
+
+def test_report_medians_and_atomic_write(tmp_path):
+    from bayespig.studies.revigo import TintSeries
+
+    series = [TintSeries(f"0{i}", "Pigment", f"0{i}A", "07A", f"0{i}B", f"0{i}C", (0.1, 0.9), (0.5, 0.5))
+              for i in range(1, 4)]
+    tints = {}
+    for s, (p, k) in zip(series, [([1, 2], [3, 1]), ([2, 4], [1, 1]), ([3, 6], [2, 5])]):
+        tints[(s.series, "bayespig")] = _prediction("bayespig", p)
+        tints[(s.series, "kubelka-munk")] = _prediction("kubelka-munk", k)
+    fits = {m: {"07A": _fit("07A", m, [0.0, 0.02], inverted=True, below=2 if m == "included" else 0)}
+            for m in ("excluded", "included")}
+    study = RevigoStudy(fits, specular_evidence(fits), "excluded", series, tints,
+                        {"specular_requested": "auto", "kubelka_munk": {"k1": 0.034, "k2": 0.56}})
+    text = revigo_report(study)
+    # medians by hand: bayespig (2, 4), KM (2, 1)
+    assert "| **median** | | | | **2.00** | **4.00** | **2.00** | **1.00** |" in text
+    assert "1 (1)" in text  # one misfit band, inverted
+    assert "films 07A are, which rules SCI out" in text
+    assert "1 of the 1 misfit bands are **inverted**" in text
+    path = write_revigo_report(study, tmp_path / "sub" / "revigo.md")
+    assert path.read_text(encoding="utf-8") == text
+    assert [p.name for p in path.parent.iterdir()] == ["revigo.md"]  # no temporary file left
+
+
+def test_cli_reports_a_missing_folder(tmp_path):
+    parser = argparse.ArgumentParser()
+    add_revigo_parser(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["revigo", str(tmp_path / "nowhere"), "--report", str(tmp_path / "r.md"), "--quiet"])
+    with pytest.raises(MeasurementError, match="not found"):
+        run_revigo(args)
+    assert not (tmp_path / "r.md").exists()
+    args = parser.parse_args(["revigo", str(tmp_path), "--eps", "0", "--quiet"])
+    with pytest.raises(ValueError, match="--eps"):
+        run_revigo(args)
+
+
+@needs_revigo
+@pytest.mark.slow
+def test_revigo_study_one_series(tmp_path):
+    study = revigo_study(REVIGO, films=["06A", "06B", "06C", "07A", "11A"], series=["06"])
+    assert study.evidence["decision"] == "excluded"  # 11A is darker than r_F(8°)
+    p, k = study.tints[("06", "bayespig")], study.tints[("06", "kubelka-munk")]
+    # vermilion tints are predicted well by both models (report: ΔE00 < 0.5)
+    assert p.delta_E.max() < 1.0 and k.delta_E.max() < 1.0
+    assert 1.0 < p.thickness < 2.0
+    text = write_revigo_report(study, tmp_path / "revigo.md").read_text(encoding="utf-8")
+    assert "Vermillion" in text
