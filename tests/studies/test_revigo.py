@@ -1,7 +1,6 @@
 """Revigo study (bayespig.studies.revigo): series, SCE/SCI evidence, report; real data when present."""
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 import pytest
