@@ -97,7 +97,6 @@ import datetime
 import json
 import math
 import os
-import tempfile
 import time
 import warnings
 from concurrent.futures import ProcessPoolExecutor
@@ -105,6 +104,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._atomic import atomic_path
 from .likelihood import ForwardModel, LogPosterior, Priors, Problem
 
 __all__ = [
@@ -1009,25 +1009,9 @@ def save_inference(idata, path):
         The path written.
     """
     path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(dir=directory, prefix=".tmp-", suffix=".nc")
-    os.close(handle)
-    try:
+    with atomic_path(path, suffix=".nc") as temporary:
         idata.to_netcdf(temporary)
-        os.chmod(temporary, 0o666 & ~_umask())
-        os.replace(temporary, path)
-    except BaseException:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
-        raise
     return path
-
-
-def _umask():
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 def load_inference(path):

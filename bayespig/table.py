@@ -26,7 +26,6 @@ import hashlib
 import json
 import os
 import sys
-import tempfile
 import warnings
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -35,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
+from ._atomic import atomic_path
 from .instruments import Instrument, channel_directions, get_instrument
 from .physics.adding_doubling import (
     MAX_OPAQUE_DOUBLINGS,
@@ -862,14 +862,8 @@ def save_table(table, path):
     payload["__description__"] = np.array(table_description(table.instrument, table.settings))
     payload["__instrument__"] = np.array(table.instrument.name)
     payload["__checksum__"] = np.array(_checksum(table.arrays))
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            np.savez(handle, **payload)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_path(path) as tmp, open(tmp, "wb") as handle:
+        np.savez(handle, **payload)
 
 
 class CacheError(ValueError):

@@ -16,7 +16,6 @@ printed. The section "## Sample design" of reports/benchmarks.md is replaced (ot
 import argparse
 import os
 import platform
-import tempfile
 import time
 from pathlib import Path
 
@@ -25,6 +24,7 @@ import numpy as np
 import bayespig
 from bayespig.studies.design import DesignPrior, candidate_designs, rank_designs
 from bayespig.table import load_table
+from _common import replace_section
 
 INSTRUMENTS = ("multi-angle-45", "8d-sci")
 N_CANDIDATES = 100
@@ -33,25 +33,6 @@ N_TIMINGS = 3
 GOAL_SECONDS = 10.0
 REPORT = Path(__file__).resolve().parent.parent / "reports" / "benchmarks.md"
 SECTION = "## Sample design"
-
-
-def replace_section(path, heading, body):
-    """Replace (or append) the section starting at ``heading`` in a Markdown file, atomically."""
-    text = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
-    start = text.find(heading + "\n")
-    if start < 0:
-        text = text.rstrip("\n") + "\n\n" + body
-    else:
-        end = text.find("\n## ", start + len(heading))
-        text = text[:start] + body + ("" if end < 0 else text[end + 1:])
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text if text.endswith("\n") else text + "\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def main(argv=None):

@@ -53,6 +53,7 @@ from bayespig.inference import (
 )
 from bayespig.likelihood import ForwardModel, LogPosterior, Priors, Problem
 from bayespig.physics.forward import specular_transmittance
+from _common import load_average, replace_section
 
 ROOT = Path(__file__).resolve().parent.parent
 REPORT = ROOT / "reports" / "benchmarks.md"
@@ -63,30 +64,6 @@ GOAL_SPECTRUM = 10.0
 A0, TAU0, EPS = 0.1, 1.0, 0.05
 N_SINGLE = 8  # wavelengths timed one at a time
 MOVE_STEPS = 6000  # fixed run per move mixture for the tau_int comparison
-
-
-def load_average():
-    return " ".join(f"{x:.2f}" for x in os.getloadavg())
-
-
-def replace_section(path, heading, body):
-    """Replace (or append) the section starting at ``heading`` in a Markdown file, atomically."""
-    text = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
-    start = text.find(heading + "\n")
-    if start < 0:
-        text = text.rstrip("\n") + "\n\n" + body
-    else:
-        end = text.find("\n## ", start + len(heading))
-        text = text[:start] + body + ("" if end < 0 else text[end + 1:])
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text if text.endswith("\n") else text + "\n")
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def problem_of(design, wavelengths, seed=1):

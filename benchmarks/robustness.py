@@ -20,7 +20,6 @@ import argparse
 import os
 import platform
 import sys
-import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -30,6 +29,7 @@ import numpy as np
 import bayespig
 from bayespig.studies.robustness import PAPER_A0, PAPER_METHODS, PAPER_TAU0, robustness_study
 from bayespig.table import load_table
+from _common import load_average, replace_section
 
 INSTRUMENT = "multi-angle-45"
 N_REPEAT = 1000
@@ -52,29 +52,6 @@ def study(executor=None):
         executor=executor,
     )
     return time.perf_counter() - start, grid
-
-
-def load_average():
-    return " ".join(f"{x:.2f}" for x in os.getloadavg())
-
-
-def replace_section(path, heading, body):
-    """Replace (or append) the section starting at ``heading`` in a Markdown file, atomically."""
-    text = path.read_text(encoding="utf-8") if path.exists() else "# Benchmarks\n"
-    start = text.find(heading + "\n")
-    if start < 0:
-        text = text.rstrip("\n") + "\n\n" + body
-    else:
-        end = text.find("\n## ", start + len(heading))
-        text = text[:start] + body + ("" if end < 0 else text[end + 1 :])
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text if text.endswith("\n") else text + "\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def main(argv=None):

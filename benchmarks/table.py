@@ -46,6 +46,7 @@ from bayespig.table import load_table
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from tests.test_table import domain_points  # the tests' domain sampler
+from _common import load_average
 
 INSTRUMENT = "multi-angle-45"
 SEED = 20240603
@@ -74,10 +75,6 @@ def cpu_seconds():
     own = resource.getrusage(resource.RUSAGE_SELF)
     children = resource.getrusage(resource.RUSAGE_CHILDREN)
     return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
-
-
-def load_average():
-    return "n/a" if not hasattr(os, "getloadavg") else " ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
 def line(label, text):

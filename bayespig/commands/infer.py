@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import os
 import sys
-import tempfile
 import warnings
 
 import numpy as np
+
+from .._atomic import atomic_path
 
 __all__ = ["add_infer_parser", "run_infer"]
 
@@ -62,7 +63,6 @@ def run_infer(args):
     from ..inference import (
         ConvergenceWarning,
         InferenceSettings,
-        _umask,
         diagnose,
         infer,
         save_inference,
@@ -88,16 +88,8 @@ def run_infer(args):
     posterior_path = os.path.join(args.out, "posterior.nc")
     summary_path = os.path.join(args.out, "summary.csv")
     save_inference(idata, posterior_path)
-    handle, temporary = tempfile.mkstemp(dir=args.out, prefix=".tmp-", suffix=".csv")
-    os.close(handle)
-    try:
+    with atomic_path(summary_path, suffix=".csv") as temporary:
         summary.to_csv(temporary, float_format="%.6g")
-        os.chmod(temporary, 0o666 & ~_umask())
-        os.replace(temporary, summary_path)
-    except BaseException:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
-        raise
     columns = [c for c in ("a_mean", "a_sd", "tau_mean", "tau_sd", "corr_a_log_tau", "a_r_hat",
                            "tau_r_hat", "a_ess_bulk", "tau_ess_bulk") if c in summary]
     print(f"bayespig infer: {idata.posterior.attrs['method']}, g {args.g}, "

@@ -10,10 +10,9 @@ find and raise one :class:`MeasurementError` listing them all.
 from __future__ import annotations
 
 import dataclasses
-import os
-import tempfile
 from dataclasses import dataclass
-from pathlib import Path
+
+from .._atomic import write_text_atomically as atomic_write_text
 
 __all__ = ["MeasurementError", "Problem", "atomic_write_text"]
 
@@ -88,30 +87,3 @@ class MeasurementError(ValueError):
         return MeasurementError([p.located(file, row) for p in self.problems])
 
 
-def atomic_write_text(path, text):
-    """Write ``text`` to ``path`` atomically: a temporary file beside it, then ``os.replace``.
-
-    Nothing is left at ``path`` (or changed there) if writing fails.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-    text : str
-    """
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as handle:
-            handle.write(text)
-        os.chmod(tmp, path.stat().st_mode & 0o777 if path.exists() else 0o666 & ~_umask())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _umask():
-    """The process umask (read by setting and restoring it)."""
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask

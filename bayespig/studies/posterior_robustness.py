@@ -19,13 +19,12 @@ says, while the RMS of point fits depends on where the fit's box stops them.
 from __future__ import annotations
 
 import datetime
-import os
-import tempfile
 import time
 import warnings
 
 import numpy as np
 
+from .._atomic import write_text_atomically
 from .robustness import PAPER_A0, PAPER_METHODS, PAPER_TAU0, robustness_study
 
 __all__ = ["posterior_robustness", "write_posterior_tables"]
@@ -186,17 +185,5 @@ def write_posterior_tables(path="reports/posterior-robustness.md", *, seed=0, ep
         lines += [("⚠: the sampler's diagnostics flagged this case (R-hat > 1.01, ESS < 400 or a run "
                   "that reached max_steps); its numbers are less certain."), ""]
     text = "\n".join(lines)
-    path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix=".tmp-", suffix=".md")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    write_text_atomically(path, text)
     return records

@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import os
 import platform
-import tempfile
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
+from .._atomic import write_text_atomically
 from ..colorimetry import delta_E2000
 from ..physics.fresnel import fresnel_reflectance
 from ..physics.mixtures import concentrations_from_mass_fractions
@@ -603,17 +603,5 @@ def revigo_report(study):
 def write_revigo_report(study, path):
     """Write :func:`revigo_report` atomically (temporary file in the same folder, then ``os.replace``)."""
     path = Path(path)
-    text = revigo_report(study)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(handle, "w", encoding="utf-8") as out:
-            out.write(text)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(temporary, 0o666 & ~umask)  # mkstemp creates 0600; a report is an ordinary file
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
+    write_text_atomically(path, revigo_report(study))
     return path

@@ -32,7 +32,6 @@ import datetime
 import json
 import os
 import platform
-import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
@@ -42,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from .._atomic import atomic_path, write_text_atomically
 from ..data.model import BLACK_SUBSTRATE_ALBEDO, WHITE_SUBSTRATE_ALBEDO
 from ..data.simulate import DESIGNS
 from ..fit import FitSettings, film_term, fit_batch
@@ -340,7 +340,7 @@ class RobustnessGrid:
 
     def write_json(self, path):
         """Write :meth:`to_records` as JSON, atomically (no per-replicate estimates)."""
-        _write_atomically(path, json.dumps(self.to_records(), indent=1) + "\n")
+        write_text_atomically(path, json.dumps(self.to_records(), indent=1) + "\n")
 
     def to_records(self):
         """One :meth:`RobustnessResult.summary` dict per case."""
@@ -734,32 +734,13 @@ def plot_robustness_map(grid, path=None, *, statistics=("a_rms", "tau_rms_relati
         figure.colorbar(mesh, ax=axes[row, :].tolist(), shrink=0.9)
     if path is not None:
         path = Path(path)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-        os.close(fd)
-        try:
+        with atomic_path(path) as tmp:
             figure.savefig(tmp, format=path.suffix.lstrip(".") or "png", dpi=120)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
     return figure
 
 
 # ---------------------------------------------------------------------------------------------
 # the report
-
-
-def _write_atomically(path, text):
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _fmt(value):
@@ -1011,7 +992,7 @@ def write_paper_tables(
         if own:
             pool.shutdown()
     text = _report(grids, command=command, elapsed=time.perf_counter() - started, eps=eps)
-    _write_atomically(path, text)
+    write_text_atomically(path, text)
     return grids
 
 
