@@ -7,6 +7,8 @@ import sys
 
 import numpy as np
 
+from ._arguments import parse_methods, parse_numbers
+
 __all__ = ["add_compare_parser", "run_compare"]
 
 
@@ -16,29 +18,6 @@ def _command():
     return shlex.join(["bayespig", *argv]) if argv[:1] == ["compare"] else None
 
 
-_NAMES = {"1": "method1", "2": "method2", "3": "method3", "4": "method4"}
-
-
-def _floats(text, flag):
-    try:
-        values = np.array([float(v) for v in str(text).split(",") if v.strip()])
-    except ValueError:
-        raise ValueError(f"{flag}: expected comma-separated numbers, got {text!r}") from None
-    if values.size == 0:
-        raise ValueError(f"{flag}: no value given")
-    return values
-
-
-def _methods(text):
-    names = []
-    for item in (v.strip() for v in text.split(",") if v.strip()):
-        name = _NAMES.get(item, item)
-        if name not in _NAMES.values():
-            raise ValueError(f"--methods: unknown method {item!r}; use 1, 2, 3, 4 (or method1..method4)")
-        names.append(name)
-    if not names:
-        raise ValueError("--methods: no method given")
-    return tuple(names)
 
 
 def add_compare_parser(subparsers):
@@ -73,7 +52,7 @@ def run_compare(args):
     from ..inference import InferenceSettings
     from ..studies import compare
 
-    methods = _methods(args.methods)
+    methods = parse_methods(args.methods, "--methods")
     if not (np.isfinite(args.eps) and 0 < args.eps < 1):
         raise ValueError(f"--eps must be a number in (0, 1), got {args.eps}")
     settings = InferenceSettings(target_ess=400, draws_per_chain=512)
@@ -90,11 +69,11 @@ def run_compare(args):
     elif args.a is not None or args.tau is not None:
         if args.a is None or args.tau is None:
             raise ValueError("--a and --tau go together")
-        a, tau = _floats(args.a, "--a"), _floats(args.tau, "--tau")
+        a, tau = parse_numbers(args.a, "--a"), parse_numbers(args.tau, "--tau")
         n = max(a.size, tau.size)
         if {a.size, tau.size} - {1, n}:
             raise ValueError(f"--a and --tau must have one value or the same number of values ({a.size} vs {tau.size})")
-        wl = _floats(args.wavelengths, "--wavelengths") if args.wavelengths else None
+        wl = parse_numbers(args.wavelengths, "--wavelengths") if args.wavelengths else None
         comparison = compare.compare_methods(np.broadcast_to(a, n), np.broadcast_to(tau, n), wavelengths=wl,
                                              **common)
     if args.paper_points:

@@ -8,6 +8,8 @@ import sys
 import tomllib
 from pathlib import Path
 
+from ._arguments import parse_numbers
+
 __all__ = ["add_design_parser", "run_design"]
 
 
@@ -35,14 +37,8 @@ DEFAULTS = {
 }
 
 
-def _floats(text, flag):
-    try:
-        values = [float(v) for v in str(text).split(",") if v.strip()]
-    except ValueError:
-        raise ValueError(f"{flag}: expected comma-separated numbers, got {text!r}") from None
-    if not values:
-        raise ValueError(f"{flag}: no value given")
-    return values
+def _number_list(text, flag):
+    return parse_numbers(text, flag).tolist()
 
 
 def _words(text):
@@ -108,11 +104,11 @@ def design_settings(args):
     if args.config:
         settings.update(read_design_file(args.config))
     if args.a_range is not None:
-        settings["a"] = _floats(args.a_range, "--a-range")
+        settings["a"] = _number_list(args.a_range, "--a-range")
     if args.tau_per_um is not None:
-        settings["tau_per_um"] = _floats(args.tau_per_um, "--tau-per-um")
+        settings["tau_per_um"] = _number_list(args.tau_per_um, "--tau-per-um")
     if args.thicknesses is not None:
-        settings["thicknesses"] = _floats(args.thicknesses, "--thicknesses")
+        settings["thicknesses"] = _number_list(args.thicknesses, "--thicknesses")
     if args.substrates is not None:
         settings["substrates"] = _words(args.substrates)
     if args.instrument is not None:

@@ -6,33 +6,10 @@ import sys
 
 import numpy as np
 
+from ._arguments import parse_methods, parse_numbers
+
 __all__ = ["add_robustness_parser", "run_robustness"]
 
-_METHOD_NAMES = {"1": "method1", "2": "method2", "3": "method3", "4": "method4"}
-
-
-def _numbers(text, name):
-    """Comma-separated positive numbers, e.g. ``0.025,0.1,0.2``."""
-    try:
-        values = tuple(float(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise ValueError(f"--{name}: expected comma-separated numbers, got {text!r}") from None
-    if not values or not all(np.isfinite(v) and v > 0 for v in values):
-        raise ValueError(f"--{name}: expected positive finite numbers, got {text!r}")
-    return values
-
-
-def _methods(text):
-    """``1,2,3,4`` or ``method1,...`` -> method names."""
-    names = []
-    for item in (v.strip() for v in text.split(",") if v.strip()):
-        name = _METHOD_NAMES.get(item, item)
-        if name not in _METHOD_NAMES.values():
-            raise ValueError(f"--method: unknown method {item!r}; use 1, 2, 3, 4 (or method1..method4)")
-        names.append(name)
-    if not names:
-        raise ValueError("--method: no method given")
-    return tuple(names)
 
 
 def add_robustness_parser(subparsers):
@@ -110,9 +87,9 @@ def run_robustness(args):
         write_posterior_tables(out, seed=args.seed, eps=args.eps, instrument=instrument)
         print(f"wrote {out}")
         return 0
-    methods = _methods(args.method)
-    a0 = _numbers(args.a0, "a0") if args.a0 else None
-    tau0 = _numbers(args.tau0, "tau0") if args.tau0 else None
+    methods = parse_methods(args.method)
+    a0 = tuple(parse_numbers(args.a0, "--a0", positive=True)) if args.a0 else None
+    tau0 = tuple(parse_numbers(args.tau0, "--tau0", positive=True)) if args.tau0 else None
     common = {"eps": args.eps, "seed": args.seed, "instrument": instrument}
     if args.map is not None:
         grid = robustness.robustness_map(methods, a0, tau0, n_repeat=args.n_repeat or 200, **common)

@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import colorimetry
+from .._json import jsonable as _jsonable
 from . import document as doc
 from . import figures as figs
 from . import quantities as q
@@ -193,23 +194,6 @@ def _fmt(x, digits=3):
 def _interval(bands, i, digits=3):
     return (f"{_fmt(bands['median'][i], digits)} [{_fmt(bands['q05'][i], digits)}, "
             f"{_fmt(bands['q95'][i], digits)}]")
-
-
-def _jsonable(value):
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, (np.floating, float)):
-        value = float(value)
-        return value if np.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.bool_):
-        return bool(value)
-    return value
 
 
 def _correlation(a, log_tau):

@@ -64,6 +64,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from .._json import jsonable as _jsonable
 from ..data.model import BLACK_SUBSTRATE_ALBEDO, WHITE_SUBSTRATE_ALBEDO
 from ..data.simulate import DESIGNS, FilmSpec
 from ..likelihood import Priors
@@ -876,19 +877,3 @@ def _write_bundle(out_dir, stem, blocks, figures, payload, title):
         return files
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-
-
-def _jsonable(value):
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, (np.floating, float)):
-        return float(value) if np.isfinite(value) else None
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    if isinstance(value, (np.bool_,)):
-        return bool(value)
-    return value

@@ -1,0 +1,43 @@
+"""Command-line values shared by the sub-commands: number lists and method names."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["METHOD_NAMES", "parse_methods", "parse_numbers"]
+
+#: ``--method 1,4`` -> the paper's method names.
+METHOD_NAMES = {"1": "method1", "2": "method2", "3": "method3", "4": "method4"}
+
+
+def parse_numbers(text, flag, *, positive=False):
+    """Comma-separated numbers such as ``0.025,0.1,0.2`` -> float array.
+
+    Raises
+    ------
+    ValueError
+        Naming ``flag`` when an item is not a number, the list is empty, or (``positive``)
+        a value is not a positive finite number.
+    """
+    try:
+        values = np.array([float(v) for v in str(text).split(",") if v.strip()])
+    except ValueError:
+        raise ValueError(f"{flag}: expected comma-separated numbers, got {text!r}") from None
+    if values.size == 0:
+        raise ValueError(f"{flag}: no value given")
+    if positive and not np.all(np.isfinite(values) & (values > 0)):
+        raise ValueError(f"{flag}: expected positive finite numbers, got {text!r}")
+    return values
+
+
+def parse_methods(text, flag="--method"):
+    """``1,4`` or ``method1,method4`` -> a tuple of the paper's method names."""
+    names = []
+    for item in (v.strip() for v in str(text).split(",") if v.strip()):
+        name = METHOD_NAMES.get(item, item)
+        if name not in METHOD_NAMES.values():
+            raise ValueError(f"{flag}: unknown method {item!r}; use 1, 2, 3, 4 (or method1..method4)")
+        names.append(name)
+    if not names:
+        raise ValueError(f"{flag}: no method given")
+    return tuple(names)
