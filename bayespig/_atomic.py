@@ -7,7 +7,7 @@ import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_path", "write_text_atomically"]
+__all__ = ["atomic_path", "write_file_set", "write_text_atomically"]
 
 
 def _umask():
@@ -58,3 +58,51 @@ def write_text_atomically(path, text):
     with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline="") as handle:
         handle.write(text)
     return path
+
+
+def write_file_set(out_dir, files):
+    """Write several files so that none of them appears unless all of them could be written.
+
+    Every file is first written into a temporary folder inside ``out_dir``; only when all
+    exist are they moved into place with :func:`os.replace`, in the order given (put the
+    pages that link the others last). On any error the temporary folder is removed and
+    ``out_dir`` keeps what it had.
+
+    Parameters
+    ----------
+    out_dir : str or os.PathLike
+        Destination folder (created if missing).
+    files : dict
+        Relative path -> content: ``bytes``, ``str`` (written as UTF-8) or a callable that
+        writes the file at the path it is given (e.g. a netCDF writer).
+
+    Returns
+    -------
+    dict
+        Relative path -> final :class:`pathlib.Path`, in the order of ``files``.
+    """
+    import shutil
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=".staging-", dir=out_dir))
+    try:
+        for relative, content in files.items():
+            target = staging / relative
+            target.parent.mkdir(parents=True, exist_ok=True)
+            if callable(content):
+                content(target)
+            elif isinstance(content, bytes):
+                target.write_bytes(content)
+            else:
+                target.write_text(content, encoding="utf-8")
+        written = {}
+        for relative in files:
+            final = out_dir / relative
+            final.parent.mkdir(parents=True, exist_ok=True)
+            os.chmod(staging / relative, 0o666 & ~_umask())
+            os.replace(staging / relative, final)
+            written[relative] = final
+        return written
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)

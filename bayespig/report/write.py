@@ -28,7 +28,6 @@ import io
 import json
 import os
 import shutil
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import colorimetry
+from .._atomic import write_file_set
 from .._json import jsonable as _jsonable
 from . import document as doc
 from . import figures as figs
@@ -643,36 +643,21 @@ def _summary_csv(wl, bands, corr, point, diag, extinction):
 
 def _write_files(out_dir, content, idata):
     """Write everything into a temporary directory in ``out_dir``, then move it into place."""
-    tmp = Path(tempfile.mkdtemp(prefix=".report-", dir=out_dir))
-    try:
-        (tmp / "figures").mkdir()
-        names = {}
-        for name, png in content["figures"].items():
-            (tmp / "figures" / f"{name}.png").write_bytes(png)
-            names[name] = f"figures/{name}.png"
-        (tmp / "summary.csv").write_text(content["csv"], encoding="utf-8")
-        (tmp / "summary.json").write_text(
-            json.dumps(content["summary"], indent=1, allow_nan=False, default=str) + "\n", encoding="utf-8")
-        (tmp / "report.md").write_text(doc.to_markdown(content["blocks"]), encoding="utf-8")
-        (tmp / "report.html").write_text(doc.to_html(content["blocks"], content["figures"], content["title"]),
-                                         encoding="utf-8")
-        if idata is not None:
-            _save_netcdf(idata, tmp / "posterior.nc")
-        # everything exists: move into place (figures first, the pages last)
-        (out_dir / "figures").mkdir(exist_ok=True)
-        files = {"figures": []}
-        for name, relative in names.items():
-            os.replace(tmp / relative, out_dir / relative)
-            files["figures"].append(out_dir / relative)
-        order = [("netcdf", "posterior.nc"), ("csv", "summary.csv"), ("json", "summary.json"),
-                 ("markdown", "report.md"), ("html", "report.html")]
-        for role, name in order:
-            if (tmp / name).exists():
-                os.replace(tmp / name, out_dir / name)
-                files[role] = out_dir / name
-        return files
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    # figures first, the pages that link them last
+    contents = {f"figures/{name}.png": png for name, png in content["figures"].items()}
+    if idata is not None:
+        contents["posterior.nc"] = lambda path: _save_netcdf(idata, path)
+    contents["summary.csv"] = content["csv"]
+    contents["summary.json"] = json.dumps(content["summary"], indent=1, allow_nan=False, default=str) + "\n"
+    contents["report.md"] = doc.to_markdown(content["blocks"])
+    contents["report.html"] = doc.to_html(content["blocks"], content["figures"], content["title"])
+    written = write_file_set(out_dir, contents)
+    files = {"figures": [written[f"figures/{name}.png"] for name in content["figures"]]}
+    for role, name in (("netcdf", "posterior.nc"), ("csv", "summary.csv"), ("json", "summary.json"),
+                       ("markdown", "report.md"), ("html", "report.html")):
+        if name in written:
+            files[role] = written[name]
+    return files
 
 
 def _save_netcdf(idata, path):

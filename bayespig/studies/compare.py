@@ -34,7 +34,6 @@ import numpy as np
 from ..data.simulate import DESIGNS
 from .design import (
     Candidate,
-    _jsonable,
     _versions,
     _write_bundle,
     fisher_information,
@@ -515,7 +514,7 @@ def write_compare_report(out_dir, *, comparison=None, maps=None, paper=None, com
         payload["maps"] = {"a0": maps.a0, "tau0": maps.tau0, "names": maps.names, "sd_a": maps.sd_a,
                            "sd_tau": maps.sd_tau, "corr": maps.corr, "identified": maps.identified,
                            "settings": maps.settings, "best_tau": best_t, "best_a": best_a}
-    return _write_bundle(out_dir, "compare", blocks, figures, _jsonable(payload), "bayespig method comparison")
+    return _write_bundle(out_dir, "compare", blocks, figures, payload, "bayespig method comparison")
 
 
 def compare_measurements(measurements, *, methods=None, eps=None, seed=0, settings=None, priors=None,

@@ -53,10 +53,7 @@ import dataclasses
 import datetime
 import io
 import json
-import os
 import platform
-import shutil
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -64,6 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from .._atomic import write_file_set
 from .._json import jsonable as _jsonable
 from ..data.model import BLACK_SUBSTRATE_ALBEDO, WHITE_SUBSTRATE_ALBEDO
 from ..data.simulate import DESIGNS, FilmSpec
@@ -857,23 +855,12 @@ def _write_bundle(out_dir, stem, blocks, figures, payload, title):
     """Write ``<stem>.html/.md/.json`` and ``figures/*.png`` via a temporary directory and ``os.replace``."""
     from ..report import document as doc
 
-    tmp = Path(tempfile.mkdtemp(prefix=f".{stem}-", dir=out_dir))
-    try:
-        (tmp / "figures").mkdir()
-        for name, png in figures.items():
-            (tmp / "figures" / f"{name}.png").write_bytes(png)
-        (tmp / f"{stem}.json").write_text(json.dumps(_jsonable(payload), indent=1, allow_nan=True) + "\n",
-                                          encoding="utf-8")
-        (tmp / f"{stem}.md").write_text(doc.to_markdown(blocks), encoding="utf-8")
-        (tmp / f"{stem}.html").write_text(doc.to_html(blocks, figures, title), encoding="utf-8")
-        (out_dir / "figures").mkdir(exist_ok=True)
-        files = {"figures": []}
-        for name in figures:
-            os.replace(tmp / "figures" / f"{name}.png", out_dir / "figures" / f"{name}.png")
-            files["figures"].append(out_dir / "figures" / f"{name}.png")
-        for role, suffix in (("json", "json"), ("markdown", "md"), ("html", "html")):
-            os.replace(tmp / f"{stem}.{suffix}", out_dir / f"{stem}.{suffix}")
-            files[role] = out_dir / f"{stem}.{suffix}"
-        return files
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    contents = {f"figures/{name}.png": png for name, png in figures.items()}
+    contents[f"{stem}.json"] = json.dumps(_jsonable(payload), indent=1, allow_nan=True) + "\n"
+    contents[f"{stem}.md"] = doc.to_markdown(blocks)
+    contents[f"{stem}.html"] = doc.to_html(blocks, figures, title)
+    written = write_file_set(out_dir, contents)
+    files = {"figures": [written[f"figures/{name}.png"] for name in figures]}
+    for role, suffix in (("json", "json"), ("markdown", "md"), ("html", "html")):
+        files[role] = written[f"{stem}.{suffix}"]
+    return files

@@ -109,6 +109,10 @@ def test_revigo_study_one_series(tmp_path):
     p, k = study.tints[("06", "bayespig")], study.tints[("06", "kubelka-munk")]
     # vermilion tints are predicted well by both models (report: ΔE00 < 0.5)
     assert p.delta_E.max() < 1.0 and k.delta_E.max() < 1.0
+    # C and the white film 07A were drawn down the same way, so C's thickness relative to
+    # 07A is of order one; two independent models (adding-doubling and Kubelka-Munk) fitting
+    # that one scalar to the same spectra of C must agree on it
     assert 1.0 < p.thickness < 2.0
+    assert abs(np.log(p.thickness / k.thickness)) < np.log(1.05), (p.thickness, k.thickness)
     text = write_revigo_report(study, tmp_path / "revigo.md").read_text(encoding="utf-8")
     assert "Vermillion" in text

@@ -107,6 +107,7 @@ def test_the_papers_findings_hold_on_the_full_study():
     """The paper's study as published: 36 cases x 1000 replicates (about 15 s on 2 cores)."""
     grid = robustness_study(PAPER_METHODS, PAPER_A0, PAPER_TAU0, n_repeat=1000, eps=EPS)
     assert_paper_findings(grid)
+    compared = 0
     for a0 in PAPER_A0:
         for tau0 in PAPER_TAU0:
             m1 = grid["method1", a0, tau0]
@@ -115,8 +116,12 @@ def test_the_papers_findings_hold_on_the_full_study():
             for m in ("method2", "method4"):
                 r = grid[m, a0, tau0]
                 if r.fraction_at_bound == 0 and PAPER_TAU_RMS[(m, a0, tau0)] < 1.0:
+                    compared += 1
                     assert 1 / 3 < r.tau_rms / PAPER_TAU_RMS[(m, a0, tau0)] < 3, (m, a0, tau0)
                     assert 1 / 3 < r.a_rms / PAPER_A_RMS[(m, a0, tau0)] < 3, (m, a0, tau0)
+    # the comparison must not be empty: of the 18 cells of methods 2 and 4, only the tau0 = 2
+    # cells with large paper errors (3 of them) or fits at a bound may be left out
+    assert compared >= 12, compared
 
 
 @pytest.mark.parametrize("method", PAPER_METHODS)
