@@ -13,6 +13,12 @@ Sampling
   same ensemble (:class:`IndependentEnsemblesMove`): the ensembles are independent Markov
   chains (R-hat between them is meaningful) while every log-probability call still evaluates
   the walkers of all ensembles at once (the call overhead dominates the cost).
+* **Stacks of wavelengths**: ``wavelengths_per_run`` (16) wavelengths share one sampler, each
+  with its own ensembles, start, run length and diagnostics: the look-up tables do not depend
+  on the wavelength, so one vectorised call of the stacked log-posterior per half-step
+  evaluates the proposals of all of them, and the per-step costs (table interpolation set-up,
+  emcee's bookkeeping) are paid once per stack instead of once per wavelength. A wavelength
+  whose run is complete is frozen and its draws are taken at that step.
 * **Start**: the point fit of :func:`bayespig.fit.fit_problem`, moved inside the prior's box,
   plus Gaussian jitter shaped by the local curvature of the log-posterior (eigenvalues clipped,
   so that ravines give elongated but bounded balls); draws outside the support or with
@@ -34,12 +40,12 @@ Sampling
   curved ravines of method 3 (``benchmarks/inference.py`` measures it); ``"stretch"``,
   ``"de"``, ``"de-snooker"`` and ``"stretch-de"`` are available.
 * **Reproducible**: the seed is split with :class:`numpy.random.SeedSequence` into one child
-  per wavelength (jitter, emcee's random state, posterior-predictive noise), so the samples of
-  a wavelength do not depend on the executor, the chunking of wavelengths into tasks, or the
-  order in which they finish.
-* **Parallel**: wavelengths are grouped into tasks run through a ``concurrent.futures``-style
-  ``executor`` (``submit``/``map``; a ``dask.distributed`` client's ``get_executor()`` works);
-  the default is a local pool of 2 processes, or serial for fewer than 4 wavelengths.
+  per wavelength (jitter, stragglers, posterior-predictive noise; the first wavelength's child
+  of a stack seeds emcee's random state), so the samples depend on the seed and the settings
+  only, not on the executor or the order in which tasks finish.
+* **Parallel**: each stack is one task run through a ``concurrent.futures``-style
+  ``executor`` (``submit``; a ``dask.distributed`` client's ``get_executor()`` works);
+  the default is a local pool of 2 processes, or serial for a single stack.
 
 InferenceData schema
 --------------------
@@ -132,8 +138,6 @@ AUTO_MOVES = "de-snooker"
 #: Diagnostics thresholds (Vehtari et al. 2021).
 RHAT_MAX = 1.01
 ESS_MIN = 400
-#: Wavelength counts below which the default is to run serially (a pool costs more than it saves).
-_SERIAL_BELOW = 4
 
 
 class ConvergenceWarning(UserWarning):
@@ -171,8 +175,11 @@ class InferenceSettings:
         walkers in roughly the central half of a Gaussian posterior).
     predictive_noise : bool
         Also store posterior-predictive values with the noise of eq. (7) (``y_rep``).
-    wavelengths_per_task : int or None
-        Wavelengths per executor task (default: about 4 tasks per pair of workers).
+    wavelengths_per_run : int
+        Wavelengths sampled together in one emcee run (one executor task): each keeps its own
+        ensembles and run length, but one log-posterior call per half-step serves them all
+        (:func:`_sample_stack`). The samples depend on this grouping (shared random stream),
+        never on the executor.
     """
 
     n_walkers: int = 16
@@ -187,11 +194,11 @@ class InferenceSettings:
     draws_per_chain: int = 1024
     jitter: float = 0.5
     predictive_noise: bool = False
-    wavelengths_per_task: int | None = None
+    wavelengths_per_run: int = 16
 
     def __post_init__(self):
         for name in ("n_walkers", "n_ensembles", "min_steps", "max_steps", "check_interval",
-                     "draws_per_chain"):
+                     "draws_per_chain", "wavelengths_per_run"):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < 1:
                 raise ValueError(f"InferenceSettings.{name} must be a positive integer, got {value!r}")
@@ -212,8 +219,6 @@ class InferenceSettings:
         if self.moves != "auto" and self.moves not in MOVES:
             raise ValueError(f"InferenceSettings.moves must be 'auto' or one of {', '.join(MOVES)}, "
                              f"got {self.moves!r}")
-        if self.wavelengths_per_task is not None and self.wavelengths_per_task < 1:
-            raise ValueError("InferenceSettings.wavelengths_per_task must be a positive integer or None")
 
     @property
     def move_mixture(self):
@@ -264,19 +269,37 @@ class IndependentEnsemblesMove:
         factor, which breaks detailed balance (fixed upstream in dfm/emcee#531, after 3.1.6),
         so it is not used.
 
+    When several wavelengths share one sampler (a stack, see :func:`_sample_stack`), the blocks
+    of one wavelength are contiguous and ``log_prob(q, member=...)`` evaluates the proposals of
+    all wavelengths in one call; blocks listed in :attr:`frozen` (wavelengths whose run is
+    complete) are left where they are and cost nothing.
+
     Parameters
     ----------
     kind : {"stretch", "de", "snooker"}
     n_ensembles : int
+        Number of blocks (ensembles of all wavelengths of the sampler).
+    log_prob : callable, optional
+        ``log_prob(theta, member=...)`` with ``member`` the stack position of every row
+        (:class:`~bayespig.likelihood.LogPosterior` of a stack); default: emcee's
+        ``log_prob_fn``.
+    walkers_per_member : int, optional
+        Walkers per wavelength of the stack (with ``log_prob``).
     """
 
     KINDS = ("stretch", "de", "snooker")
 
-    def __init__(self, kind, n_ensembles):
+    def __init__(self, kind, n_ensembles, log_prob=None, walkers_per_member=None):
         if kind not in self.KINDS:
             raise ValueError(f"kind must be one of {', '.join(self.KINDS)}, got {kind!r}")
+        if (log_prob is None) != (walkers_per_member is None):
+            raise ValueError("log_prob and walkers_per_member go together")
         self.kind = kind
         self.n_ensembles = int(n_ensembles)
+        self.log_prob = log_prob
+        self.walkers_per_member = walkers_per_member
+        #: Boolean per block: True leaves the block's walkers unchanged (None: every block moves).
+        self.frozen = None
 
     def tune(self, state, accepted):
         """No tuning (emcee's interface)."""
@@ -315,14 +338,20 @@ class IndependentEnsemblesMove:
         if width * self.n_ensembles != n_total or width % 2 or half < 3:
             raise RuntimeError("IndependentEnsemblesMove needs an even number (>= 6) of walkers per ensemble")
         random = model.random
-        order = np.argsort(random.rand(self.n_ensembles, width), axis=1)
-        order += (np.arange(self.n_ensembles) * width)[:, None]
+        blocks = np.arange(self.n_ensembles)
+        if self.frozen is not None:
+            blocks = blocks[~np.asarray(self.frozen, dtype=bool)]
+        order = np.argsort(random.rand(blocks.size, width), axis=1)
+        order += (blocks * width)[:, None]
         accepted = np.zeros(n_total, dtype=bool)
         for active, other in ((order[:, :half], order[:, half:]), (order[:, half:], order[:, :half])):
             q, factor = self._proposal(state.coords[active], state.coords[other], random)
             q = q.reshape(-1, n_dim)
             index = active.reshape(-1)
-            new_log_probs, _ = model.compute_log_prob_fn(q)
+            if self.log_prob is None:
+                new_log_probs, _ = model.compute_log_prob_fn(q)
+            else:
+                new_log_probs = self.log_prob(q, member=index // self.walkers_per_member)
             ok = factor.reshape(-1) + new_log_probs - state.log_prob[index] > np.log(random.rand(index.size))
             state.coords[index[ok]] = q[ok]
             state.log_prob[index[ok]] = new_log_probs[ok]
@@ -330,8 +359,10 @@ class IndependentEnsemblesMove:
         return state, accepted
 
 
-def _moves(settings):
-    return [(IndependentEnsemblesMove(kind, settings.n_ensembles), weight)
+def _moves(settings, n_stack=1, log_prob=None):
+    """The move mixture for ``n_stack`` wavelengths of ``settings.n_ensembles`` ensembles each."""
+    per_member = None if log_prob is None else settings.n_ensembles * settings.n_walkers
+    return [(IndependentEnsemblesMove(kind, n_stack * settings.n_ensembles, log_prob, per_member), weight)
             for kind, weight in settings.move_mixture]
 
 
@@ -423,9 +454,12 @@ def _autocorr_times(chain, n_ensembles):
 STRAGGLER_LOG_P = 25.0
 
 
-def _replace_stragglers(state, log_post, n_ensembles, rng):
-    """Move walkers far below their ensemble's median log p onto (jittered) good walkers."""
-    coords, log_prob = state.coords, state.log_prob
+def _replace_stragglers(coords, log_prob, log_post, n_ensembles, rng):
+    """Move walkers far below their ensemble's median log p onto (jittered) good walkers.
+
+    ``coords`` (n_walkers, n_dim) and ``log_prob`` (n_walkers,) of one wavelength are
+    changed in place.
+    """
     width = coords.shape[0] // n_ensembles
     for k in range(n_ensembles):
         block = np.arange(k * width, (k + 1) * width)
@@ -442,7 +476,6 @@ def _replace_stragglers(state, log_post, n_ensembles, rng):
                 if np.isfinite(value):
                     coords[walker], log_prob[walker] = candidate, value
                     break
-    return state
 
 
 def _stored_draws_pass(theta, target_ess):
@@ -458,75 +491,139 @@ def _stored_draws_pass(theta, target_ess):
     return True
 
 
-def _sample_wavelength(log_post, theta0, settings, seed_sequence):
-    """emcee run at one wavelength; returns draws (chains, draws, n_dim) and run statistics."""
-    import emcee
+def _run_verdict(chain, log_prob, settings, steps):
+    """Whether the run of one wavelength is complete after ``steps`` steps.
 
-    jitter_seed, emcee_seed, predictive_seed, straggler_seed = seed_sequence.spawn(4)
-    n_total = settings.n_walkers * settings.n_ensembles
-    if settings.n_walkers < 2 * log_post.n_dim or settings.n_walkers % 2 or settings.n_walkers < 6:
-        raise ValueError(f"InferenceSettings.n_walkers must be even, >= 6 and >= 2 * n_dim = "
-                         f"{2 * log_post.n_dim} for parameters {log_post.parameter_names}")
-    start = _initial_walkers(log_post, theta0, n_total, settings.jitter, np.random.default_rng(jitter_seed))
-    sampler = emcee.EnsembleSampler(n_total, log_post.n_dim, log_post, vectorize=True, moves=_moves(settings))
-    sampler.random_state = np.random.RandomState(np.random.MT19937(emcee_seed)).get_state()
-    kept = settings.steps_kept
-    width, n_chains = settings.n_walkers, settings.n_ensembles
+    Parameters
+    ----------
+    chain, log_prob : numpy.ndarray
+        Post-pre-burn chain (steps, walkers, n_dim) and log-posterior (steps, walkers) of the
+        wavelength's ensembles.
 
-    def per_chain(x):  # (kept, n_total, ...) -> (chains, walkers * kept, ...), walker-major
+    Returns
+    -------
+    dict or int
+        The run's results (draws, statistics) when complete (or capped at ``max_steps``), else
+        the number of further steps before the next check.
+    """
+    n_chains, width, kept = settings.n_ensembles, settings.n_walkers, settings.steps_kept
+    n_member = n_chains * width
+
+    def per_chain(x):  # (kept, n_member, ...) -> (chains, walkers * kept, ...), walker-major
         x = x.reshape((kept, n_chains, width) + x.shape[2:])
         x = np.moveaxis(x, 0, 2)  # (chains, walkers, kept, ...)
         return x.reshape((n_chains, width * kept) + x.shape[3:])
 
-    def stored(burn):
-        thin = max(1, (steps - burn) // kept)
-        rows = steps - 1 - thin * np.arange(kept)[::-1]
-        return thin, per_chain(sampler.get_chain()[rows]), per_chain(sampler.get_log_prob()[rows])
+    # tau_int from the second half (free of the start transient), then burn-in from it
+    tau = _autocorr_times(chain[steps // 2:], n_chains)
+    tau_max = float(tau.max())
+    burn = max(0, min(math.ceil(settings.burn_in_multiple * tau_max), steps - kept))
+    ess = n_member * (steps - burn) / tau
+    needed = max(settings.min_autocorr_multiple * tau_max, settings.target_ess * tau_max / n_member, kept) + burn
+    thin = max(1, (steps - burn) // kept)
+    rows = steps - 1 - thin * np.arange(kept)[::-1]
+    theta = per_chain(chain[rows])
+    complete = False
+    if steps >= needed and (ess >= settings.target_ess).all():
+        # emcee's criterion met; the stored draws must pass the diagnostics too (walkers of
+        # an ensemble are correlated, which the per-walker tau_int does not see)
+        complete = _stored_draws_pass(theta, settings.target_ess)
+        chunk = max(settings.check_interval, steps // 2)
+    else:
+        chunk = max(settings.check_interval, int(1.1 * needed) - steps)
+    capped = not complete and steps >= settings.max_steps
+    if not (complete or capped):
+        return chunk
+    return {"theta": theta, "lp": per_chain(log_prob[rows]), "autocorr_time": tau, "n_steps": steps,
+            "n_burn_in": burn, "thin": thin, "max_steps_reached": capped}
+
+
+def _sample_stack(stacked, singles, starts, settings, seed_sequences):
+    """emcee run of a stack of wavelengths in one sampler; one run record per wavelength.
+
+    Every wavelength has ``n_ensembles`` ensembles of ``n_walkers`` walkers of its own
+    (contiguous blocks; moves never mix blocks), so its chains are those of a run of its own,
+    but the proposals of all wavelengths are evaluated in one call of the stacked
+    log-posterior per half-step: the table interpolation and emcee's bookkeeping are paid
+    once per step for the whole stack. A wavelength whose run is complete is frozen (its
+    blocks no longer move or cost anything) and its draws are taken at that step, so its run
+    length is its own.
+
+    Parameters
+    ----------
+    stacked : LogPosterior
+        Log-posterior of the stack (``index`` = the wavelengths).
+    singles : list of LogPosterior
+        The same per wavelength (start, stragglers).
+    starts : numpy.ndarray
+        Point-fit start per wavelength, (n_stack, n_dim).
+    settings : InferenceSettings
+    seed_sequences : list of numpy.random.SeedSequence
+        One per wavelength (its start jitter, stragglers, predictive noise); the first one's
+        also seeds emcee's random state of the stack.
+
+    Returns
+    -------
+    list of dict
+    """
+    import emcee
+
+    n_stack, n_dim = len(singles), stacked.n_dim
+    if settings.n_walkers < 2 * n_dim or settings.n_walkers % 2 or settings.n_walkers < 6:
+        raise ValueError(f"InferenceSettings.n_walkers must be even, >= 6 and >= 2 * n_dim = "
+                         f"{2 * n_dim} for parameters {stacked.parameter_names}")
+    n_chains = settings.n_ensembles
+    per_member = n_chains * settings.n_walkers
+    children = [seq.spawn(4) for seq in seed_sequences]  # jitter, emcee, predictive, stragglers
+    start = np.concatenate([
+        _initial_walkers(single, theta0, per_member, settings.jitter, np.random.default_rng(child[0]))
+        for single, theta0, child in zip(singles, starts, children)])
+    member_of_walker = np.repeat(np.arange(n_stack), per_member)
+
+    def log_prob_of_all(coords):  # emcee's interface: every walker of the stack
+        return stacked(coords, member=member_of_walker)
+
+    moves = _moves(settings, n_stack, stacked)
+    sampler = emcee.EnsembleSampler(n_stack * per_member, n_dim, log_prob_of_all, vectorize=True, moves=moves)
+    sampler.random_state = np.random.RandomState(np.random.MT19937(children[0][1])).get_state()
 
     # pre-burn: let the ensembles spread out, then move stragglers (walkers stranded far below
     # their ensemble's log-posterior, which ensemble moves cannot bring back), and start afresh
-    pre_steps = max(1, settings.min_steps // 2)
-    state = sampler.run_mcmc(start, pre_steps, progress=False)
-    state = _replace_stragglers(state, log_post, n_chains, np.random.default_rng(straggler_seed))
+    state = sampler.run_mcmc(start, max(1, settings.min_steps // 2), progress=False)
+    for k, (single, child) in enumerate(zip(singles, children)):
+        block = slice(k * per_member, (k + 1) * per_member)
+        _replace_stragglers(state.coords[block], state.log_prob[block], single, n_chains,
+                            np.random.default_rng(child[3]))
     sampler.reset()
+    runs = [None] * n_stack
     steps, chunk = 0, max(settings.min_steps, settings.check_interval)
-    capped = False
-    while True:
+    while any(run is None for run in runs):
+        live = np.array([run is None for run in runs])
+        for move, _ in moves:
+            move.frozen = np.repeat(~live, n_chains)
         chunk = int(min(chunk, settings.max_steps - steps))
         state = sampler.run_mcmc(state, chunk, progress=False, skip_initial_state_check=True)
         steps += chunk
-        # tau_int from the second half (free of the start transient), then burn-in from it
-        tau = _autocorr_times(sampler.get_chain()[steps // 2:], settings.n_ensembles)
-        tau_max = float(tau.max())
-        burn = max(0, min(math.ceil(settings.burn_in_multiple * tau_max), steps - kept))
-        ess = n_total * (steps - burn) / tau
-        needed = max(settings.min_autocorr_multiple * tau_max,
-                     settings.target_ess * tau_max / n_total, kept) + burn
-        if steps >= needed and (ess >= settings.target_ess).all():
-            # emcee's criterion met; the stored draws must pass the diagnostics too (walkers of
-            # an ensemble are correlated, which the per-walker tau_int does not see)
-            thin, theta, log_prob = stored(burn)
-            if _stored_draws_pass(theta, settings.target_ess):
-                break
-            chunk = max(settings.check_interval, steps // 2)
-        else:
-            chunk = max(settings.check_interval, int(1.1 * needed) - steps)
-        if steps >= settings.max_steps:
-            capped = True
-            thin, theta, log_prob = stored(burn)
-            break
-    accepted = sampler.acceptance_fraction.reshape(n_chains, width).mean(axis=1)
-    return {
-        "theta": theta,
-        "lp": log_prob,
-        "acceptance_rate": accepted,
-        "autocorr_time": tau,
-        "n_steps": steps,
-        "n_burn_in": burn,
-        "thin": thin,
-        "max_steps_reached": capped,
-        "predictive_seed": predictive_seed,
-    }
+        chain, log_prob = sampler.get_chain(), sampler.get_log_prob()
+        accepted = sampler.backend.accepted
+        chunks = []
+        for k in np.flatnonzero(live):
+            block = slice(k * per_member, (k + 1) * per_member)
+            verdict = _run_verdict(chain[:, block], log_prob[:, block], settings, steps)
+            if isinstance(verdict, dict):
+                verdict["acceptance_rate"] = (accepted[block] / steps).reshape(n_chains, -1).mean(axis=1)
+                verdict["predictive_seed"] = children[k][2]
+                runs[k] = verdict
+            else:
+                chunks.append(verdict)
+        chunk = min(chunks, default=0)
+    return runs
+
+
+def _sample_wavelength(log_post, theta0, settings, seed_sequence):
+    """emcee run at one wavelength (a stack of one); returns its run record."""
+    return _sample_stack(log_post, [log_post], np.asarray(theta0, dtype=float)[None], settings,
+                         [seed_sequence])[0]
 
 
 def _wavelength_outputs(log_post, run, settings):
@@ -578,15 +675,13 @@ class _Task:
 
 
 def _run_task(task):
-    """Sample the wavelengths of one task (runs in a worker process)."""
+    """Sample the wavelengths of one task, one stack in one sampler (runs in a worker process)."""
     tables = _WORKER_TABLES.setdefault((task.g, task.problem.n), {})
     model = ForwardModel(task.problem, g=task.g, tables=tables)
-    results = []
-    for index, start, seed in zip(task.indices, task.starts, task.seeds):
-        log_post = LogPosterior(model, index, task.priors, g=task.g, eps=task.eps)
-        run = _sample_wavelength(log_post, start, task.settings, seed)
-        results.append(_wavelength_outputs(log_post, run, task.settings))
-    return results
+    singles = [LogPosterior(model, index, task.priors, g=task.g, eps=task.eps) for index in task.indices]
+    stacked = LogPosterior(model, list(task.indices), task.priors, g=task.g, eps=task.eps)
+    runs = _sample_stack(stacked, singles, task.starts, task.settings, list(task.seeds))
+    return [_wavelength_outputs(single, run, task.settings) for single, run in zip(singles, runs)]
 
 
 def _map_tasks(tasks, executor, progress):
@@ -715,15 +810,15 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     starts, fit = _point_starts(problem, g, model.tables, priors, log_post0, n_wl)
     seeds = np.random.SeedSequence(int(seed)).spawn(n_wl)
 
+    # the stacks of wavelengths sampled together depend on the settings only (never on the
+    # executor), so the samples do not depend on how the tasks are run
+    per_run = settings.wavelengths_per_run
+    tasks = [_Task(problem, g, eps, priors, settings, tuple(range(i, min(i + per_run, n_wl))),
+                   starts[i:i + per_run], tuple(seeds[i:i + per_run]))
+             for i in range(0, n_wl, per_run)]
     own_pool = None
-    if executor is None and n_wl >= _SERIAL_BELOW:
-        own_pool = executor = ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1))
-    per_task = settings.wavelengths_per_task or max(1, math.ceil(n_wl / 8))
-    if executor is None:
-        per_task = n_wl
-    tasks = [_Task(problem, g, eps, priors, settings, tuple(range(i, min(i + per_task, n_wl))),
-                   starts[i:i + per_task], tuple(seeds[i:i + per_task]))
-             for i in range(0, n_wl, per_task)]
+    if executor is None and len(tasks) > 1:
+        own_pool = executor = ProcessPoolExecutor(max_workers=min(2, len(tasks), os.cpu_count() or 1))
     if executor is None:
         _WORKER_TABLES.setdefault((g, problem.n), {}).update(model.tables)
     try:
@@ -843,7 +938,8 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         or ``"infer"``: one ``eps`` per wavelength shared by those samples, log-uniform prior.
     executor : concurrent.futures.Executor, optional
         Runs the wavelengths in parallel (``submit``); e.g. a ``dask.distributed`` client's
-        ``get_executor()``. Default: a local pool of 2 processes (serial below 4 wavelengths).
+        ``get_executor()``. Default: a local pool of 2 processes (serial for a single stack of
+        ``settings.wavelengths_per_run`` wavelengths).
     progress : bool
         Progress bar over wavelengths.
     priors : Priors, optional

@@ -344,28 +344,50 @@ class _StencilTable:
         return terms[:, :self.n_channels]
 
 
+def _stack_members(member, n_rows, n_stack):
+    """Stack position of every row (checked); zeros for a single wavelength."""
+    if member is None:
+        if n_stack > 1:
+            raise ValueError("a stack of wavelengths needs member= (the stack position of every row)")
+        return np.zeros(n_rows, dtype=int)
+    member = np.asarray(member)
+    if member.shape != (n_rows,):
+        raise ValueError(f"member must have shape ({n_rows},), got {member.shape}")
+    return member
+
+
 class WavelengthModel:
-    """Fast predictions of every film at one wavelength, equal to :meth:`ForwardModel.predict`.
+    """Fast predictions of every film at one wavelength (or a stack of them), equal to
+    :meth:`ForwardModel.predict`.
 
     Everything that does not depend on the parameters is prepared once: the
-    stacked table arrays, each film's substrate albedo ``r_s`` at this wavelength
+    stacked table arrays, each film's substrate albedo ``r_s`` at these wavelengths
     and the films that share a table and a film group (the same film on black and
     on white, method 4), which share one interpolation. Values below the tables'
     first ``tau`` node (outside the default prior) go through the tables themselves.
 
+    The tables do not depend on the wavelength, only ``r_s`` does, so the walkers of
+    several wavelengths can be evaluated in one call (``member`` says which wavelength of
+    the stack each row belongs to): one table interpolation serves them all, which is
+    what makes sampling several wavelengths in one emcee run cheap.
+
     Parameters
     ----------
     model : ForwardModel
-    index : int
-        Wavelength index.
+    index : int or sequence of int
+        Wavelength index, or the indices of a stack of wavelengths.
     """
 
     def __init__(self, model, index):
         problem = model.problem
-        if not 0 <= index < problem.n_wavelengths:
+        indices = np.atleast_1d(np.asarray(index))
+        if indices.ndim != 1 or indices.size == 0 or not np.issubdtype(indices.dtype, np.integer):
+            raise ValueError(f"index must be an integer or a non-empty sequence of integers, got {index!r}")
+        if ((indices < 0) | (indices >= problem.n_wavelengths)).any():
             raise ValueError(f"index must lie in [0, {problem.n_wavelengths}), got {index}")
         self.model = model
-        self.index = int(index)
+        self.indices = indices.astype(int)
+        self.index = int(indices[0]) if np.ndim(index) == 0 else None
         self.n_values = problem.n_values
         self._units = {}
         self._film_of_part = {}  # first value index -> index among the reflectance films
@@ -380,12 +402,12 @@ class WavelengthModel:
             else:
                 stencil = model._stencil_table(table)
                 unit = self._units.setdefault((table.key, column), (stencil, column, []))
-                unit[2].append((slice(start, stop), float(film.r_s[index])))
+                unit[2].append((slice(start, stop), np.asarray(film.r_s, dtype=float)[self.indices]))
                 self._film_of_part[start] = len(self._film_of_part)
             start = stop
         self._tau_min = min([u[0].tau_min for u in self._units.values() if u[1] >= 0], default=0.0)
 
-    def __call__(self, a, tau, g=None, r_s_scale=None):
+    def __call__(self, a, tau, g=None, r_s_scale=None, member=None):
         """Predicted values, shape (W, n_values).
 
         Parameters
@@ -400,10 +422,14 @@ class WavelengthModel:
             Shape (W, n_reflectance_films): factor on each reflectance film's substrate
             albedo, in problem film order (substrate albedo as a nuisance parameter, see
             :mod:`bayespig.substrate_nuisance`); ``r_s * factor`` must stay in [0, 1].
+        member : numpy.ndarray of int, optional
+            Shape (W,): position in the stack of wavelengths of every row (required for a
+            stack, None for a single wavelength).
         """
         a = np.asarray(a, dtype=float)
         tau = np.asarray(tau, dtype=float).reshape(a.shape[0], -1)
         g = None if g is None else np.asarray(g, dtype=float)
+        member = _stack_members(member, a.shape[0], self.indices.size)
         out = np.empty((a.shape[0], self.n_values))
         omega = np.maximum(1.0 - a, 0.0)[:, None]
         small = None
@@ -422,35 +448,46 @@ class WavelengthModel:
             log_q, log_du, r_up = stencil.interpolate_finite(a, film_tau, g)
             black = (omega * -np.expm1(-film_tau)[:, None]) * np.exp(log_q) + stencil.specular
             through = np.exp(log_du)
-            for part, r_s in films:
+            for part, r_s_stack in films:
+                r_s = r_s_stack[member]
                 if r_s_scale is not None:
                     r_s = r_s * r_s_scale[:, self._film_of_part[part.start]]
                 out[:, part] = black + (r_s / (1.0 - r_s * r_up))[:, None] * through
         for part, column in self._transmittance:
             out[:, part] = self._t_normal * np.exp(-tau[:, column])[:, None]
         if small is not None:
-            g_small = np.zeros(small.sum()) if g is None else g[small]
-            if r_s_scale is None:
-                out[small] = self.model.predict(self.index, a[small], tau[small], g_small)
-            else:
-                out[small] = self._predict_scaled(a[small], tau[small], g_small, r_s_scale[small])
+            # rows below the first tau node, one wavelength at a time through the tables
+            for position in np.unique(member[small]):
+                rows = np.flatnonzero(small & (member == position))
+                g_rows = np.zeros(rows.size) if g is None else g[rows]
+                if r_s_scale is None:
+                    out[rows] = self.model.predict(self.indices[position], a[rows], tau[rows], g_rows)
+                else:
+                    out[rows] = self._predict_scaled(self.indices[position], a[rows], tau[rows], g_rows,
+                                                     r_s_scale[rows])
         return out
 
-    def _predict_scaled(self, a, tau, g, r_s_scale):
-        """:meth:`ForwardModel.predict` with every reflectance film's ``r_s`` scaled (slow path)."""
+    def _predict_scaled(self, index, a, tau, g, r_s_scale):
+        """:meth:`ForwardModel.predict` at wavelength ``index`` with every reflectance film's
+        ``r_s`` scaled (slow path)."""
         problem, parts, k = self.model.problem, [], 0
         for film, table in zip(problem.films, self.model.film_tables):
             film_tau = np.full(a.shape, np.inf) if film.opaque else tau[:, problem.groups.index(film.group)]
             if film.kind == "transmittance":
                 parts.append(self._t_normal * np.exp(-film_tau)[:, None])
                 continue
-            parts.append(table(a=a, tau=film_tau, g=g, r_s=film.r_s[self.index] * r_s_scale[:, k]))
+            parts.append(table(a=a, tau=film_tau, g=g, r_s=film.r_s[index] * r_s_scale[:, k]))
             k += 1
         return np.concatenate(parts, axis=-1)
 
 
 class LogPosterior:
     """Vectorised log-posterior at one wavelength, over ``theta`` of shape (n_walkers, n_dim).
+
+    Built for a stack of wavelengths (``index`` a sequence), one call evaluates walkers of
+    all of them: ``member`` gives the stack position of every row of ``theta``. The
+    wavelengths share the parameter layout, priors and known errors; only the observed
+    values and the substrate albedos differ.
 
     Parameters are ``[a, log tau_1, ..., log tau_G, (g), (log eps)]``: with the
     priors of :class:`Priors` the density is flat in every sampled coordinate on a
@@ -460,8 +497,8 @@ class LogPosterior:
     Parameters
     ----------
     model : ForwardModel
-    index : int
-        Wavelength index.
+    index : int or sequence of int
+        Wavelength index, or the indices of a stack of wavelengths.
     priors : Priors
     g : {"isotropic", "free"}
         Whether ``g`` is a parameter (otherwise 0).
@@ -496,7 +533,8 @@ class LogPosterior:
         self.index = index
         self.priors = priors
         self.free_g = g == "free"
-        self.observed = model.problem.observed(index)
+        self.evaluate = model.at_wavelength(index)
+        self._observed = np.stack([model.problem.observed(i) for i in self.evaluate.indices])
         known = model.problem.known_eps(eps)
         self.infer_eps = bool(np.isnan(known).any())
         self.eps = known
@@ -504,7 +542,6 @@ class LogPosterior:
         self._inv_known = np.where(self._unknown, 0.0, 1.0 / np.where(self._unknown, 1.0, known))
         self._log_known = np.log(np.where(self._unknown, 1.0, known))
         self.n_groups = len(model.problem.groups)
-        self.evaluate = model.at_wavelength(index)
         names = ["a"] + [f"log_tau[{g}]" for g in model.problem.groups]
         if self.free_g:
             names.append("g")
@@ -521,6 +558,15 @@ class LogPosterior:
             high.append(np.log(priors.eps_range[1]))
         self.lower = np.array(low)
         self.upper = np.array(high)
+
+    @property
+    def observed(self):
+        """Observed values, (n_values,) at one wavelength, (n_stack, n_values) for a stack."""
+        return self._observed[0] if self.evaluate.index is not None else self._observed
+
+    @observed.setter
+    def observed(self, values):
+        self._observed = np.asarray(values, dtype=float).reshape(self._observed.shape).copy()
 
     @property
     def n_dim(self):
@@ -546,28 +592,34 @@ class LogPosterior:
         theta = np.atleast_2d(theta)
         return ((theta >= self.lower) & (theta <= self.upper)).all(axis=1)
 
-    def log_likelihood(self, theta, pointwise=False):
+    def log_likelihood(self, theta, pointwise=False, member=None):
         """Log-likelihood of eq. (7) per parameter vector (``-inf`` outside the support).
 
         With ``pointwise=True`` the terms per measured value, shape (n, n_values).
+        ``member`` (n,) is the stack position of every row (required for a stack).
         """
         theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        n_values = self._observed.shape[1]
+        member = _stack_members(member, theta.shape[0], self._observed.shape[0])
         if theta.shape[0] == 0:  # no walkers (e.g. every start draw left the support)
-            return np.empty((0, self.observed.size) if pointwise else 0)
+            return np.empty((0, n_values) if pointwise else 0)
         ok = self.in_support(theta)
         everywhere = ok.all()
         if not (everywhere or ok.any()):
-            return np.full((theta.shape[0], self.observed.size) if pointwise else theta.shape[0], -np.inf)
+            return np.full((theta.shape[0], n_values) if pointwise else theta.shape[0], -np.inf)
         inside = theta if everywhere else theta[ok]
+        member = member if everywhere else member[ok]
+        observed = self._observed[0] if self._observed.shape[0] == 1 else self._observed[member]
         k = 1 + self.n_groups
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            model = self.evaluate(inside[:, 0], np.exp(inside[:, 1:k]), inside[:, k] if self.free_g else None)
+            model = self.evaluate(inside[:, 0], np.exp(inside[:, 1:k]), inside[:, k] if self.free_g else None,
+                                  member=None if self._observed.shape[0] == 1 else member)
             inv_eps, log_eps = self._inv_known, self._log_known
             if self.infer_eps:
                 log_eps_free = inside[:, k + self.free_g][:, None]
                 inv_eps = np.where(self._unknown, np.exp(-log_eps_free), inv_eps)
                 log_eps = log_eps + log_eps_free * self._unknown
-            z = (self.observed / model - 1.0) * inv_eps
+            z = (observed / model - 1.0) * inv_eps
             if pointwise:
                 value = -0.5 * z * z - np.log(model) - log_eps - 0.5 * _LOG_2PI
             else:
@@ -580,6 +632,6 @@ class LogPosterior:
         out[ok] = value
         return out
 
-    def __call__(self, theta):
+    def __call__(self, theta, member=None):
         """Log-posterior (flat priors in the sampled coordinates: equal to the log-likelihood)."""
-        return self.log_likelihood(theta)
+        return self.log_likelihood(theta, member=member)

@@ -161,3 +161,27 @@ def test_transmittance_is_the_closed_form_of_eq5(problems, models):
     column = next(k for k, f in enumerate(problem.films) if f.kind == "transmittance")
     start = sum(f.observed.shape[1] for f in problem.films[:column])
     np.testing.assert_allclose(values[:, start], t_f ** 2 * np.exp(-tau), rtol=TRANSMITTANCE_REL_TOL)
+
+
+@pytest.mark.parametrize("method", ["method1", "method3", "method4"])
+def test_stacked_log_posterior_equals_one_wavelength_at_a_time(problems, models, method):
+    """A stack of wavelengths evaluates each row with its own wavelength's data (r_s, observed);
+    below the tables' first tau node (the slow path) too."""
+    problem, model = problems[method], models[method]
+    rng = np.random.default_rng(7)
+    indices = [1, 0, 1]
+    stacked = LogPosterior(model, indices, Priors(), eps=0.04)
+    theta = _theta_grid(len(problem.groups), rng)
+    member = rng.integers(0, len(indices), theta.shape[0])
+    together = stacked.log_likelihood(theta, pointwise=True, member=member)
+    for position, index in enumerate(indices):
+        rows = member == position
+        alone = LogPosterior(model, index, Priors(), eps=0.04).log_likelihood(theta[rows], pointwise=True)
+        np.testing.assert_array_equal(together[rows], alone)
+    with pytest.raises(ValueError, match="member"):
+        stacked(theta)
+    tiny = np.full((4, len(problem.groups)), 5e-4)  # below tau_min = 2^-10
+    a = np.full(4, 0.2)
+    values = model.at_wavelength(indices)(a, tiny, member=np.array([0, 1, 2, 1]))
+    for row, index in enumerate([1, 0, 1, 0]):
+        np.testing.assert_allclose(values[row], model.predict(index, a[row], tiny[row]), rtol=1e-12)

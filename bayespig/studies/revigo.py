@@ -234,6 +234,7 @@ class RevigoStudy:
     compositions: dict = None  # film id -> "Pigment-Pigment 10-90"
     card_in_air: dict = None  # film id -> (misfit bands converted, misfit bands air, max rms air)
     posteriors: dict = None  # series -> TintPosterior (when sampled)
+    model_error: dict = None  # series -> ModelErrorRegion (when sampled, >= 3 series)
 
 
 def revigo_study(path=None, *, specular="auto", films=None, series=None, progress=None, posterior=False,
@@ -324,9 +325,13 @@ def revigo_study(path=None, *, specular="auto", films=None, series=None, progres
                                 int(np.sum(as_air.rms_relative_deviation > MISFIT_THRESHOLD)),
                                 float(np.max(as_air.rms_relative_deviation)))
     say("cards in air vs converted")
-    posteriors_c = {}
+    posteriors_c, model_error = {}, {}
     if posterior:
+        from .tints import cross_validated_model_error
+
         posteriors_c = _tint_posteriors(series, sets, tint_models[0], posterior_eps, n_draws, seed, executor, say)
+        if len(posteriors_c) >= 3:
+            model_error = cross_validated_model_error(posteriors_c, probability=0.9, seed=seed)
     settings = {"path": str(path), "specular": chosen, "specular_requested": specular,
                 "posterior": ({"eps": posterior_eps, "n_draws": n_draws, "seed": seed, "method": "method4",
                                "credible_probability": 0.9} if posterior else None),
@@ -339,7 +344,7 @@ def revigo_study(path=None, *, specular="auto", films=None, series=None, progres
             compositions[film_id] = (f"{'-'.join(comp['pigments'])} "
                                      f"{'-'.join(f'{r:g}' for r in comp['mass_ratios'])}")
     return RevigoStudy(fits, evidence, chosen, series, tints, settings, compositions, card_in_air,
-                       posteriors_c)
+                       posteriors_c, model_error)
 
 
 def _tint_posteriors(series, sets, model, eps, n_draws, seed, executor, say):
@@ -556,9 +561,12 @@ def revigo_report(study):
         header += (" measured C in bayespig 90 % region (black, white) | posterior median ΔE00 to measured "
                    "(black, white) | region size: median ΔE00 of draws to their mean (black, white) |")
         rule += "---|---|---|"
+        if study.model_error:
+            header += " in the region widened by the other series' model error (black, white) | that error, rms ΔE |"
+            rule += "---|---|"
     lines += [header, rule]
     de = {"bayespig": [], "kubelka-munk": []}
-    inside = []
+    inside, inside_widened = [], []
     for s in study.series:
         p, k = study.tints[(s.series, "bayespig")], study.tints[(s.series, "kubelka-munk")]
         de["bayespig"].append(p.delta_E)
@@ -573,12 +581,17 @@ def revigo_report(study):
             size = np.median(delta_E2000(post.lab_draws, post.lab_draws.mean(axis=0)[None]), axis=0)
             row += (f" {'yes' if post.inside[0] else 'no'}, {'yes' if post.inside[1] else 'no'} | "
                     f"{median[0]:.2f}, {median[1]:.2f} | {size[0]:.2f}, {size[1]:.2f} |")
+            if study.model_error:
+                widened = study.model_error[s.series]
+                inside_widened.append(widened.inside)
+                row += (f" {'yes' if widened.inside[0] else 'no'}, {'yes' if widened.inside[1] else 'no'} | "
+                        f"{widened.rms:.2f} |")
         lines.append(row)
     if study.series:
         med = {m: np.median(np.array(v), axis=0) for m, v in de.items()}
         lines.append(f"| **median** | | | | **{med['bayespig'][0]:.2f}** | **{med['bayespig'][1]:.2f}** | "
                      f"**{med['kubelka-munk'][0]:.2f}** | **{med['kubelka-munk'][1]:.2f}** | |"
-                     + (" | | |" if study.posteriors else ""))
+                     + (" | | |" if study.posteriors else "") + (" | |" if study.model_error else ""))
         summary = (f"Median ΔE00 over {len(study.series)} series — bayespig (isotropic, fixed cards): "
                    f"**{med['bayespig'][0]:.2f} over black, {med['bayespig'][1]:.2f} over white**; "
                    "Kubelka–Munk with Saunderson: "
@@ -594,6 +607,16 @@ def revigo_report(study):
                         "white (goal: 80 %); the regions reflect the posterior of A, W and B at the "
                         "assumed eps only, not the mixing rule's error, so they are too narrow where "
                         "the rule fails.")
+        if inside_widened:
+            inside_widened = np.array(inside_widened)
+            summary += (" With the model error added — Gaussian in CIELAB with the second moment of the "
+                        "residuals (measured minus posterior-mean prediction) of the *other* series, "
+                        "leave one series out (`bayespig.studies.tints.cross_validated_model_error`) — "
+                        f"the measured colour lies in the widened 90 % region for {inside_widened[:, 0].mean():.0%} "
+                        f"of the series over black and {inside_widened[:, 1].mean():.0%} over white. The "
+                        "widened regions are as large as the model's demonstrated error on other pigments; "
+                        "the series outside them are the ones whose error is larger than the others' (see "
+                        "below).")
         lines += ["", summary]
     lines += _section("Where the models fail, and why") + _discussion(study)
     lines += ["", "## Settings", "", "```"] + [f"{k}: {v}" for k, v in study.settings.items()] + ["```", ""]

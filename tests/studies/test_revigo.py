@@ -89,6 +89,40 @@ def test_report_medians_and_atomic_write(tmp_path):
     assert [p.name for p in path.parent.iterdir()] == ["revigo.md"]  # no temporary file left
 
 
+def test_report_with_posteriors_states_both_region_coverages():
+    """Posterior regions with and without the cross-validated model error, per series and in
+    the summary, as the regions say."""
+    from bayespig.studies.revigo import TintSeries
+    from bayespig.studies.tints import TintPosterior, cross_validated_model_error
+
+    rng = np.random.default_rng(4)
+    series = [TintSeries(f"0{i}", "Pigment", f"0{i}A", "07A", f"0{i}B", f"0{i}C", (0.1, 0.9), (0.5, 0.5))
+              for i in range(1, 6)]
+    tints, posteriors = {}, {}
+    for s in series:
+        tints[(s.series, "bayespig")] = _prediction("bayespig", [1, 1])
+        tints[(s.series, "kubelka-munk")] = _prediction("kubelka-munk", [1, 1])
+        centre = rng.uniform(20, 80, size=(2, 3))
+        draws = centre + 0.1 * rng.standard_normal((100, 2, 3))
+        posteriors[s.series] = TintPosterior(draws, centre + rng.normal(0, 2.0, (2, 3)), np.ones(100),
+                                             np.ones((100, 2)), np.zeros(2, bool), 0.9)
+    regions = cross_validated_model_error(posteriors, seed=0)
+    fits = {m: {"07A": _fit("07A", m, [0.0, 0.0])} for m in ("excluded", "included")}
+    study = RevigoStudy(fits, specular_evidence(fits), "excluded", series, tints,
+                        {"specular_requested": "auto", "kubelka_munk": {"k1": 0.034, "k2": 0.56}},
+                        posteriors=posteriors, model_error=regions)
+    text = revigo_report(study)
+    inside = np.array([regions[s.series].inside for s in series])
+    assert "widened by the other series' model error" in text
+    assert (f"widened 90 % region for {inside[:, 0].mean():.0%} of the series over black and "
+            f"{inside[:, 1].mean():.0%} over white") in text
+    assert "90 % credible region for 0% of the series over black and 0% over white" in text
+    for s in series:
+        r = regions[s.series]
+        assert (f"| {'yes' if r.inside[0] else 'no'}, {'yes' if r.inside[1] else 'no'} | {r.rms:.2f} |"
+                in text)
+
+
 def test_cli_reports_a_missing_folder(tmp_path):
     parser = argparse.ArgumentParser()
     add_revigo_parser(parser.add_subparsers(dest="command"))
