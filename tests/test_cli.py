@@ -55,3 +55,32 @@ def test_robustness_rejects_unknown_methods_and_bad_grids(tmp_path, capsys):
     assert "unknown method '5'" in capsys.readouterr().err
     assert main(["robustness", "--a0", "0.1,x"]) == 2
     assert "--a0" in capsys.readouterr().err
+
+
+def test_every_command_is_wired_to_a_function():
+    """Each subcommand (and sub-subcommand) the parser knows dispatches to a function: a
+    command registered without one fails at run time with an AttributeError, not a usage
+    message."""
+    import argparse
+
+    from bayespig.cli import build_parser
+
+    def leaves(parser, path=()):
+        actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        if not actions:
+            yield path, parser
+            return
+        for name, child in actions[0].choices.items():
+            yield from leaves(child, path + (name,))
+
+    found = list(leaves(build_parser()))
+    assert {p[0] for p, _ in found} >= {"demo", "infer", "report", "table", "check", "simulate",
+                                       "robustness", "compare", "design", "revigo"}
+    for path, parser in found:
+        assert callable(parser.get_default("func")), " ".join(path)
+
+
+def test_revigo_command_on_a_missing_folder_exits_2(tmp_path, capsys):
+    assert main(["revigo", str(tmp_path / "nowhere"), "--report", str(tmp_path / "r.md"), "--quiet"]) == 2
+    assert "nowhere" in capsys.readouterr().err
+    assert not (tmp_path / "r.md").exists()

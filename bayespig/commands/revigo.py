@@ -30,6 +30,7 @@ def add_revigo_parser(subparsers):
     parser.add_argument("--draws", type=int, default=200, help="posterior predictive draws per tint")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--quiet", action="store_true", help="no progress messages")
+    parser.set_defaults(func=run_revigo)
     return parser
 
 
