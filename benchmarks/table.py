@@ -19,7 +19,7 @@ Prints
   ensemble in one call, through the table and through the likelihood's fast path
   (``WavelengthModel``, method 4);
 * the largest relative error against the direct solver at 2,000 random points over the whole
-  domain (the sampler of ``tests/test_table.py``: shares near a -> 0, a -> 1, tau -> 0, large
+  domain (the sampler of the table tests, ``bayespig._validation``: shares near a -> 0, a -> 1, tau -> 0, large
   tau, opaque, r_s = 0 and 1), per instrument, and for the g table with 40 values of g.
 
 Tables are built into a temporary cache directory, so the user's cache is neither used nor
@@ -42,10 +42,10 @@ import bayespig
 from bayespig.data import simulate
 from bayespig.instruments import BUILT_IN_INSTRUMENTS, Instrument, predict
 from bayespig.likelihood import ForwardModel, Problem
+from bayespig._validation import domain_points  # the tests' domain sampler
 from bayespig.table import load_table
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from tests.test_table import domain_points  # the tests' domain sampler
 from _common import load_average
 
 INSTRUMENT = "multi-angle-45"

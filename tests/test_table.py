@@ -22,6 +22,7 @@ import pytest
 
 import bayespig
 from bayespig import cli
+from bayespig._validation import DEFAULT_TAU_MIN, domain_points
 from bayespig.instruments import (
     BUILT_IN_INSTRUMENTS,
     Instrument,
@@ -84,8 +85,6 @@ N_RANDOM_POINTS = 2000
 #: Distinct g values in the slow full-domain check of a g table (the solver pays per g).
 N_G_VALUES_SLOW = 40
 BUILT_IN = tuple(BUILT_IN_INSTRUMENTS)
-#: Tau of the first finite node of the default tables; below it tables blend linearly.
-DEFAULT_TAU_MIN = TableSettings().tau_nodes[0]
 
 #: A small user-defined instrument for the g-axis and cache tests: one geometry on each
 #: side of the specular plane, so azimuthal modes enter with both signs.
@@ -98,55 +97,6 @@ SMALL_SETTINGS = TableSettings(n_a=12, log2_tau_min=-4, log2_tau_max=4, per_octa
 
 
 # --- helpers --------------------------------------------------------------------------------
-def mixture(rng, size, components):
-    """``size`` draws from a mixture of ``(weight, sampler(n))`` components, in random order."""
-    weights = np.array([w for w, _ in components], dtype=float)
-    choice = rng.choice(len(components), size=size, p=weights / weights.sum())
-    out = np.empty(size)
-    for k, (_, sampler) in enumerate(components):
-        out[choice == k] = sampler(int((choice == k).sum()))
-    return out
-
-
-def domain_points(rng, size, tau_max=100.0):
-    """Random (a, tau, r_s) over the issue's domain, with shares near every edge.
-
-    a in [0, 1] (also 1e-7..0.1 and 1 - 1e-6..1 - 0.1); tau in [0, tau_max] (also below
-    the first tau node, log-uniform from 1e-5, and large), a quarter opaque; r_s in [0, 1]
-    with exact 0 and 1.
-    """
-    a = mixture(
-        rng,
-        size,
-        [
-            (0.4, lambda n: rng.uniform(0.0, 1.0, n)),
-            (0.2, lambda n: 10.0 ** rng.uniform(-7.0, -1.0, n)),
-            (0.15, lambda n: 1.0 - 10.0 ** rng.uniform(-6.0, -1.0, n)),
-            (0.25, lambda n: rng.uniform(0.0, 1.0, n) ** 2),
-        ],
-    )
-    tau = mixture(
-        rng,
-        size,
-        [
-            (0.3, lambda n: rng.uniform(0.0, tau_max, n)),
-            (0.25, lambda n: np.exp(rng.uniform(np.log(1e-5), np.log(tau_max), n))),
-            (0.1, lambda n: rng.uniform(0.0, DEFAULT_TAU_MIN, n)),
-            (0.1, lambda n: rng.uniform(0.5 * tau_max, tau_max, n)),
-            (0.25, lambda n: np.full(n, np.inf)),
-        ],
-    )
-    r_s = mixture(
-        rng,
-        size,
-        [
-            (0.7, lambda n: rng.uniform(0.0, 1.0, n)),
-            (0.1, lambda n: np.zeros(n)),
-            (0.05, lambda n: np.ones(n)),
-            (0.15, lambda n: 1.0 - 10.0 ** rng.uniform(-4.0, -1.0, n)),
-        ],
-    )
-    return a, tau, r_s
 
 
 def relative_error(values, reference):
