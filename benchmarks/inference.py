@@ -163,7 +163,7 @@ def direct_ratio(settings, n_steps=20, wavelengths=(450.0, 650.0)):
             for _ in range(repeats):
                 post(half)
             per_call = (time.perf_counter() - start) / repeats
-            sampler = emcee.EnsembleSampler(n_total, post.n_dim, post, vectorize=True, moves=_moves(settings))
+            sampler = emcee.EnsembleSampler(n_total, post.n_dim, post, vectorize=True, moves=_moves(settings, post.n_dim))
             sampler.random_state = np.random.RandomState(0).get_state()
             start = time.perf_counter()
             sampler.run_mcmc(walkers, n_steps, progress=False)
@@ -188,7 +188,7 @@ def moves_comparison(settings):
         for moves in MOVES:
             s = InferenceSettings(**{**settings.__dict__, "moves": moves})
             walkers = _initial_walkers(post, starts[0], n_total, s.jitter, np.random.default_rng(0))
-            sampler = emcee.EnsembleSampler(n_total, post.n_dim, post, vectorize=True, moves=_moves(s))
+            sampler = emcee.EnsembleSampler(n_total, post.n_dim, post, vectorize=True, moves=_moves(s, post.n_dim))
             sampler.random_state = np.random.RandomState(1).get_state()
             start = time.perf_counter()
             sampler.run_mcmc(walkers, MOVE_STEPS, progress=False)
@@ -286,9 +286,10 @@ def main(argv=None):
         "Regenerate with `/tmp/venv/bin/python benchmarks/inference.py` from the repository root.",
         "Method 4 (one film on black and on white, 2 samples x 6 geometries of `multi-angle-45`,",
         f"a0 = {A0:g}, tau0 = {TAU0:g}, eps = {EPS:g}); default `InferenceSettings` (4 independent",
-        "ensembles x 16 walkers per wavelength, DE/snooker moves, run until >= 50 tau_int and bulk",
-        "and tail ESS >= 1000 for every parameter; up to 16 wavelengths share one sampler and one",
-        "log-posterior call per half-step, each with its own ensembles and run length). The",
+        "ensembles x 16 walkers per wavelength, moves \"auto\" (80 % Gaussian, 20 % DE), run until",
+        ">= 50 tau_int and bulk and tail ESS >= 1000 for every parameter; up to 16 wavelengths",
+        "share one sampler and one log-posterior call per half-step, each with its own ensembles",
+        "and run length). The",
         "spectrum figures are `infer()` end to end; a run on its own includes the start, sampling,",
         "posterior predictive and pointwise log-likelihood. Wall-clock times with the load average.",
         "",

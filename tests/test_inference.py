@@ -431,3 +431,14 @@ def test_no_stray_warnings_on_a_clean_run(method4_set):
         warnings.simplefilter("error")
         infer(simulate(a=0.1, tau=1.0, design="method4", wavelengths=[500.0], eps=0.05, seed=1),
               progress=False, settings=FAST)
+
+
+def test_gaussian_moves_need_more_walkers_than_parameters():
+    """The Gaussian proposal's covariance comes from n_walkers / 2 walkers: "auto" falls back
+    to DE moves when they do not outnumber the parameters by two; an explicit choice errs."""
+    settings = InferenceSettings()  # 16 walkers: 8 complementary
+    assert settings.move_mixture_for(6) == settings.move_mixture
+    assert all(kind != "gaussian" for kind, _ in settings.move_mixture_for(7))
+    with pytest.raises(ValueError, match="= 18 for 7 parameters"):
+        InferenceSettings(moves="gaussian").move_mixture_for(7)
+    assert json.loads(settings.to_json(7))["move_mixture"] == [["de", 0.8], ["snooker", 0.2]]

@@ -562,7 +562,7 @@ def revigo_report(study):
                    "(black, white) | region size: median ΔE00 of draws to their mean (black, white) |")
         rule += "---|---|---|"
         if study.model_error:
-            header += " in the region widened by the other series' model error (black, white) | that error, rms ΔE |"
+            header += " in the region widened by the other series' model error (black, white) | that error, rms ΔE*ab |"
             rule += "---|---|"
     lines += [header, rule]
     de = {"bayespig": [], "kubelka-munk": []}
@@ -613,10 +613,13 @@ def revigo_report(study):
                         "residuals (measured minus posterior-mean prediction) of the *other* series, "
                         "leave one series out (`bayespig.studies.tints.cross_validated_model_error`) — "
                         f"the measured colour lies in the widened 90 % region for {inside_widened[:, 0].mean():.0%} "
-                        f"of the series over black and {inside_widened[:, 1].mean():.0%} over white. The "
-                        "widened regions are as large as the model's demonstrated error on other pigments; "
-                        "the series outside them are the ones whose error is larger than the others' (see "
-                        "below).")
+                        f"of the series over black and {inside_widened[:, 1].mean():.0%} over white. These "
+                        "regions are as wide as the protocol's demonstrated error on the other pigments — "
+                        "the rms CIELAB distance (ΔE*ab) of their residuals is "
+                        f"{np.median([r.rms for r in study.model_error.values()]):.1f} (median over series), "
+                        "dominated by the series the mixing rule fails on — so they say honestly how far off "
+                        "a prediction can be, not that it is precise; the series outside them are those "
+                        "whose error exceeds the others' (see below).")
         lines += ["", summary]
     lines += _section("Where the models fail, and why") + _discussion(study)
     lines += ["", "## Settings", "", "```"] + [f"{k}: {v}" for k, v in study.settings.items()] + ["```", ""]
