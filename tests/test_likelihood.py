@@ -163,20 +163,24 @@ def test_transmittance_is_the_closed_form_of_eq5(problems, models):
     np.testing.assert_allclose(values[:, start], t_f ** 2 * np.exp(-tau), rtol=TRANSMITTANCE_REL_TOL)
 
 
+@pytest.mark.parametrize("eps", [0.04, None])
 @pytest.mark.parametrize("method", ["method1", "method3", "method4"])
-def test_stacked_log_posterior_equals_one_wavelength_at_a_time(problems, models, method):
-    """A stack of wavelengths evaluates each row with its own wavelength's data (r_s, observed);
-    below the tables' first tau node (the slow path) too."""
+def test_stacked_log_posterior_equals_one_wavelength_at_a_time(problems, models, method, eps):
+    """A stack of wavelengths evaluates each row with its own wavelength's data (r_s, observed),
+    with eps known or inferred (one log eps per row); below the tables' first tau node (the
+    slow path) too."""
     problem, model = problems[method], models[method]
     rng = np.random.default_rng(7)
     indices = [1, 0, 1]
-    stacked = LogPosterior(model, indices, Priors(), eps=0.04)
+    stacked = LogPosterior(model, indices, Priors(), eps=eps)
     theta = _theta_grid(len(problem.groups), rng)
+    if eps is None:  # a log eps column, inside the prior's box
+        theta = np.column_stack([theta, np.log(rng.uniform(0.01, 0.2, theta.shape[0]))])
     member = rng.integers(0, len(indices), theta.shape[0])
     together = stacked.log_likelihood(theta, pointwise=True, member=member)
     for position, index in enumerate(indices):
         rows = member == position
-        alone = LogPosterior(model, index, Priors(), eps=0.04).log_likelihood(theta[rows], pointwise=True)
+        alone = LogPosterior(model, index, Priors(), eps=eps).log_likelihood(theta[rows], pointwise=True)
         np.testing.assert_array_equal(together[rows], alone)
     with pytest.raises(ValueError, match="member"):
         stacked(theta)
