@@ -11,17 +11,19 @@ the default binder quadrature (no measurement nodes) over the forward benchmark'
 (a, tau) grid (``benchmarks/forward.py``), for the isotropic mode and for the modes of
 Henyey-Greenstein g = 0.5, and prints the largest difference of the reflection and
 transmission kernels relative to the largest mode-0 reflection kernel entry (the scale of the
-BRDF; high modes are small, and their smallest entries are round-off in both solvers). Prints
-only.
+BRDF; high modes are small, and their smallest entries are round-off in both solvers). The
+section "## Layer solvers" of reports/benchmarks.md is replaced (``--no-write``: print only).
 """
 
+import argparse
 import os
 import platform
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
-from _common import load_average
+from _common import load_average, replace_section
 
 from bayespig.physics.adding_doubling import (
     START_THICKNESS,
@@ -36,6 +38,8 @@ GRID_SIZE = 64
 A_GRID = np.linspace(0.001, 0.999, GRID_SIZE)
 TAU_GRID = np.logspace(-2, 2, GRID_SIZE)
 N_BINDER = 1.45
+REPORT = Path(__file__).resolve().parent.parent / "reports" / "benchmarks.md"
+SECTION = "## Layer solvers"
 
 
 def scaled_difference(x, reference, scale):
@@ -43,12 +47,21 @@ def scaled_difference(x, reference, scale):
     return float(np.abs(x - reference).max() / scale)
 
 
-def main():
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, python "
-          f"{platform.python_version()}, load average {load_average()}")
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--no-write", action="store_true", help="print only")
+    args = parser.parse_args(argv)
+    lines = []
+
+    def say(line):
+        print(line, flush=True)
+        lines.append(line)
+
+    say(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, python "
+        f"{platform.python_version()}, load average {load_average()}")
     mu, weight = binder_quadrature(DEFAULT_QUADRATURE_POINTS, N_BINDER)
     a, tau = (x.ravel() for x in np.meshgrid(A_GRID, TAU_GRID, indexing="ij"))
-    print(f"{mu.size} binder nodes ({DEFAULT_QUADRATURE_POINTS} per interval), {a.size} (a, tau) points")
+    say(f"{mu.size} binder nodes ({DEFAULT_QUADRATURE_POINTS} per interval), {a.size} (a, tau) points")
     for g in (0.0, 0.5):
         n_modes = n_fourier_modes(g)
         p_r = phase_fourier_modes(mu, mu, g, n_modes, reflection=True)
@@ -68,9 +81,30 @@ def main():
             scale = np.abs(R_d).max() if scale is None else scale  # mode 0
             worst = max(worst, scaled_difference(R_e, R_d, scale), scaled_difference(T_e, T_d, scale))
         per_d, per_e = (times[k] / a.size * 1e3 for k in ("doubling", "eigen"))
-        print(f"g = {g:g}: {n_modes} mode(s); doubling {per_d:.3f} ms/point, eigen {per_e:.3f} ms/point "
-              f"(x{per_d / per_e:.1f}); largest difference of R, T / largest mode-0 R {worst:.1e}")
-    print(f"load average at end {load_average()}")
+        say(f"g = {g:g}: {n_modes} mode(s); doubling {per_d:.3f} ms/point, eigen {per_e:.3f} ms/point "
+            f"(x{per_d / per_e:.1f}); largest difference of R, T / largest mode-0 R {worst:.1e}")
+    say(f"load average at end {load_average()}")
+    if args.no_write:
+        return 0
+    body = [
+        SECTION,
+        "",
+        "Regenerate with `/tmp/venv/bin/python benchmarks/layer_solvers.py` from the repository root.",
+        "Layer kernels (no surface, no measurement nodes) on the default binder quadrature over the",
+        "forward benchmark's 64 x 64 (a, tau) grid: adding-doubling (`layer_mode`, what the forward",
+        "model uses) against the discrete-ordinate eigen solution (`layer_mode_eigen`, issue 2",
+        "groundwork, not yet used by the forward model: the zero-weight measurement directions need",
+        "the formal integration of the source function).",
+        "",
+        f"Run of {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC:",
+        "",
+        "```",
+        *lines,
+        "```",
+        "",
+    ]
+    replace_section(REPORT, SECTION, "\n".join(body) + "\n")
+    print(f"updated {REPORT}")
     return 0
 
 
