@@ -1,8 +1,13 @@
 """Shared by the benchmark scripts: load average and the sections of reports/benchmarks.md."""
 
 import os
+import time
+from pathlib import Path
 
 from bayespig._atomic import write_text_atomically
+
+#: The Markdown file every benchmark writes its section of.
+REPORT = Path(__file__).resolve().parent.parent / "reports" / "benchmarks.md"
 
 
 def load_average():
@@ -20,3 +25,26 @@ def replace_section(path, heading, body):
         end = text.find("\n## ", start + len(heading))
         text = text[:start] + body + ("" if end < 0 else text[end + 1:])
     write_text_atomically(path, text if text.endswith("\n") else text + "\n")
+
+
+def write_run_section(heading, regenerate, description, lines, after=(), path=REPORT):
+    """Replace ``heading``'s section with the standard layout of a benchmark run.
+
+    Parameters
+    ----------
+    heading : str
+        Markdown heading, e.g. ``"## Inference"``.
+    regenerate : str
+        The command line that regenerates the section.
+    description : sequence of str
+        Lines saying what was measured.
+    lines : sequence of str
+        The printed output of the run (put in a code block, under the run's UTC time).
+    after : sequence of str
+        Lines after the output (goal tables, figures).
+    """
+    body = [heading, "", f"Regenerate with `{regenerate}` from the repository root.", *description, "",
+            f"Run of {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC:", "", "```", *lines, "```", "",
+            *after]
+    replace_section(path, heading, "\n".join(body).rstrip("\n") + "\n")
+    print(f"updated {path}")

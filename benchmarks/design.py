@@ -17,21 +17,19 @@ import argparse
 import os
 import platform
 import time
-from pathlib import Path
 
 import numpy as np
+from _common import REPORT, replace_section
 
 import bayespig
 from bayespig.studies.design import DesignPrior, candidate_designs, rank_designs
 from bayespig.table import load_table
-from _common import replace_section
 
 INSTRUMENTS = ("multi-angle-45", "8d-sci")
 N_CANDIDATES = 100
 N_DRAWS = 32
 N_TIMINGS = 3
 GOAL_SECONDS = 10.0
-REPORT = Path(__file__).resolve().parent.parent / "reports" / "benchmarks.md"
 SECTION = "## Sample design"
 
 

@@ -33,16 +33,17 @@ is replaced (other sections kept), atomically.
 
 import argparse
 import os
-from concurrent.futures import Future
 import platform
 import sys
-import tempfile
 import time
+from concurrent.futures import Future
 from pathlib import Path
 
 import numpy as np
+from _common import load_average, write_run_section
 
 import bayespig
+from bayespig._atomic import atomic_path
 from bayespig.data import simulate
 from bayespig.inference import (
     MOVES,
@@ -58,10 +59,8 @@ from bayespig.inference import (
 )
 from bayespig.likelihood import ForwardModel, LogPosterior, Priors, Problem
 from bayespig.physics.forward import specular_transmittance
-from _common import load_average, replace_section
 
 ROOT = Path(__file__).resolve().parent.parent
-REPORT = ROOT / "reports" / "benchmarks.md"
 FIGURE = ROOT / "reports" / "inference-moves.png"
 SECTION = "## Inference"
 GOAL_PER_WAVELENGTH = 0.3
@@ -221,15 +220,8 @@ def plot_moves(curves, path):
     axes[0].set_ylabel("normalised autocorrelation")
     axes[1].legend(fontsize=8)
     fig.tight_layout()
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp.png")
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=110)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_path(path, suffix=".png") as temporary:
+        fig.savefig(temporary, dpi=110)
     plt.close(fig)
 
 
@@ -280,25 +272,17 @@ def main(argv=None):
     if args.no_write:
         return 0
     median = float(np.median(times))
-    body = [
-        SECTION,
-        "",
-        "Regenerate with `/tmp/venv/bin/python benchmarks/inference.py` from the repository root.",
+    description = [
         "Method 4 (one film on black and on white, 2 samples x 6 geometries of `multi-angle-45`,",
         f"a0 = {A0:g}, tau0 = {TAU0:g}, eps = {EPS:g}); default `InferenceSettings` (4 independent",
         "ensembles x 16 walkers per wavelength, moves \"auto\" (80 % Gaussian, 20 % DE), run until",
         ">= 50 tau_int and bulk and tail ESS >= 1000 for every parameter; up to 16 wavelengths",
         "share one sampler and one log-posterior call per half-step, each with its own ensembles",
-        "and run length). The",
-        "spectrum figures are `infer()` end to end; a run on its own includes the start, sampling,",
-        "posterior predictive and pointwise log-likelihood. Wall-clock times with the load average.",
-        "",
-        f"Run of {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC:",
-        "",
-        "```",
-        *lines,
-        "```",
-        "",
+        "and run length). The spectrum figures are `infer()` end to end; a run on its own includes",
+        "the start, sampling, posterior predictive and pointwise log-likelihood. Wall-clock times",
+        "with the load average.",
+    ]
+    after = [
         "| goal (issue 6) | measured | |",
         "|---|---|---|",
         (f"| per wavelength, method 4, ESS >= 1000 for a and tau: <= {GOAL_PER_WAVELENGTH:g} s "
@@ -307,23 +291,21 @@ def main(argv=None):
         (f"| the same for one wavelength on its own (a stack of one) | median {median:.2f} s | "
          f"{'met' if median <= GOAL_PER_WAVELENGTH else 'not met'} |"),
         (f"| 31-band spectrum on 2 cores <= {GOAL_SPECTRUM:g} s | {elapsed:.1f} s | "
-        f"{'met' if elapsed <= GOAL_SPECTRUM else 'not met'} |"),
+         f"{'met' if elapsed <= GOAL_SPECTRUM else 'not met'} |"),
         "",
     ]
     if move_rows:
-        body += [
+        after += [
             ("Mixing of the moves (fixed runs of "
-            f"{MOVE_STEPS} steps, same start and seed; tau_int in steps, largest over the 4 ensembles):"),
+             f"{MOVE_STEPS} steps, same start and seed; tau_int in steps, largest over the 4 ensembles):"),
             "",
             "| design | moves | tau_int(a) | tau_int(log tau) | acceptance |",
             "|---|---|---|---|---|",
             *[f"| {d} | {m} | {t[0]:.1f} | {t[1]:.1f} | {acc:.2f} |" for d, m, t, acc in move_rows],
             "",
             "![autocorrelation of a per move mixture](inference-moves.png)",
-            "",
         ]
-    replace_section(REPORT, SECTION, "\n".join(body) + "\n")
-    print(f"updated {REPORT}")
+    write_run_section(SECTION, "/tmp/venv/bin/python benchmarks/inference.py", description, lines, after)
     return 0
 
 

@@ -20,10 +20,9 @@ import os
 import platform
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
-from _common import load_average, replace_section
+from _common import load_average, write_run_section
 
 from bayespig.physics.adding_doubling import (
     START_THICKNESS,
@@ -38,7 +37,6 @@ GRID_SIZE = 64
 A_GRID = np.linspace(0.001, 0.999, GRID_SIZE)
 TAU_GRID = np.logspace(-2, 2, GRID_SIZE)
 N_BINDER = 1.45
-REPORT = Path(__file__).resolve().parent.parent / "reports" / "benchmarks.md"
 SECTION = "## Layer solvers"
 
 
@@ -86,25 +84,13 @@ def main(argv=None):
     say(f"load average at end {load_average()}")
     if args.no_write:
         return 0
-    body = [
-        SECTION,
-        "",
-        "Regenerate with `/tmp/venv/bin/python benchmarks/layer_solvers.py` from the repository root.",
+    write_run_section(SECTION, "/tmp/venv/bin/python benchmarks/layer_solvers.py", [
         "Layer kernels (no surface, no measurement nodes) on the default binder quadrature over the",
         "forward benchmark's 64 x 64 (a, tau) grid: adding-doubling (`layer_mode`, what the forward",
         "model uses) against the discrete-ordinate eigen solution (`layer_mode_eigen`, issue 2",
         "groundwork, not yet used by the forward model: the zero-weight measurement directions need",
         "the formal integration of the source function).",
-        "",
-        f"Run of {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC:",
-        "",
-        "```",
-        *lines,
-        "```",
-        "",
-    ]
-    replace_section(REPORT, SECTION, "\n".join(body) + "\n")
-    print(f"updated {REPORT}")
+    ], lines)
     return 0
 
 

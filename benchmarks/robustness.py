@@ -22,21 +22,19 @@ import platform
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
 import numpy as np
+from _common import load_average, write_run_section
 
 import bayespig
 from bayespig.studies.robustness import PAPER_A0, PAPER_METHODS, PAPER_TAU0, robustness_study
 from bayespig.table import load_table
-from _common import load_average, replace_section
 
 INSTRUMENT = "multi-angle-45"
 N_REPEAT = 1000
 #: Timed runs of the default executor (the machine is shared: best and median are reported).
 N_TIMINGS = 3
 GOAL_SECONDS = 20.0
-REPORT = Path(__file__).resolve().parent.parent / "reports" / "benchmarks.md"
 SECTION = "## Robustness study"
 
 
@@ -124,37 +122,25 @@ def main(argv=None):
     else:
         verdict = "**missed**"
     if not args.no_write:
-        body = "\n".join(
-            [
-                SECTION,
-                "",
-                "Regenerate with `/tmp/venv/bin/python benchmarks/robustness.py` from the repository",
-                "root (add `--dask` to time a local `dask.distributed` cluster too). The study is the",
-                "paper's (section 4): 4 methods x 9 (a0, tau0) pairs x 1000 noisy replicates of the",
-                "`multi-angle-45` instrument, each replicate a full point fit (grid scan over",
-                "(sqrt a, log tau), then Levenberg–Marquardt from up to 3 basins; vectorised over the",
-                "replicates of a case, cases in parallel). The machine is shared; these are wall-clock",
-                "times on 2 cores with the load average printed.",
-                "",
-                f"Run of {time.strftime('%Y-%m-%d %H:%M', time.gmtime())} UTC:",
-                "",
-                "```",
-                *lines,
-                "```",
-                "",
-                "| goal (issue 5) | measured | |",
-                "|---|---|---|",
-                (
-                    f"| full paper study (36 cases x 1000 fits) on 2 cores <= {GOAL_SECONDS:g} s "
-                    f"| best {best:.1f} s, median {median:.1f} s of {N_TIMINGS} ({cpu:.1f} s CPU "
-                    "one case at a time) "
-                    f"| {verdict} |"
-                ),
-                "",
-            ]
-        )
-        replace_section(REPORT, SECTION, body)
-        print(f"updated {REPORT}")
+        description = [
+            "Add `--dask` to time a local `dask.distributed` cluster too. The study is the",
+            "paper's (section 4): 4 methods x 9 (a0, tau0) pairs x 1000 noisy replicates of the",
+            "`multi-angle-45` instrument, each replicate a full point fit (grid scan over",
+            "(sqrt a, log tau), then Levenberg–Marquardt from up to 3 basins; vectorised over the",
+            "replicates of a case, cases in parallel). The machine is shared; these are wall-clock",
+            "times on 2 cores with the load average printed.",
+        ]
+        after = [
+            "| goal (issue 5) | measured | |",
+            "|---|---|---|",
+            (
+                f"| full paper study (36 cases x 1000 fits) on 2 cores <= {GOAL_SECONDS:g} s "
+                f"| best {best:.1f} s, median {median:.1f} s of {N_TIMINGS} ({cpu:.1f} s CPU "
+                "one case at a time) "
+                f"| {verdict} |"
+            ),
+        ]
+        write_run_section(SECTION, "/tmp/venv/bin/python benchmarks/robustness.py", description, lines, after)
     return 0
 
 

@@ -20,6 +20,10 @@ from bayespig.studies.revigo import (
 from bayespig.studies.tints import TintPrediction
 
 REVIGO = default_revigo_path()
+#: C's thickness relative to 07A for series 06: both were drawn down the same way and C holds
+#: half as much white, so the ratio is of order one; this bracket excludes a fit escaping to
+#: its bounds (1e-2, 1e2) or collapsing onto 07A's thickness.
+SAME_DRAWDOWN_THICKNESS = (1.0, 2.0)
 needs_revigo = pytest.mark.skipif(not (REVIGO / "revigo-mixture-specifications.txt").exists(),
                                   reason=f"Revigo data not found at {REVIGO} (set BAYESPIG_REVIGO)")
 
@@ -146,7 +150,7 @@ def test_revigo_study_one_series(tmp_path):
     # C and the white film 07A were drawn down the same way, so C's thickness relative to
     # 07A is of order one; two independent models (adding-doubling and Kubelka-Munk) fitting
     # that one scalar to the same spectra of C must agree on it
-    assert 1.0 < p.thickness < 2.0
+    assert SAME_DRAWDOWN_THICKNESS[0] < p.thickness < SAME_DRAWDOWN_THICKNESS[1]
     assert abs(np.log(p.thickness / k.thickness)) < np.log(1.05), (p.thickness, k.thickness)
     text = write_revigo_report(study, tmp_path / "revigo.md").read_text(encoding="utf-8")
     assert "Vermillion" in text

@@ -38,6 +38,10 @@ RECOVERY_ABS_TOL = 1e-4
 METHOD4_TAU_FACTOR = 1.25
 #: a errors of methods 1, 2 and 4 stay below this (issue 5: "a few 1e-3").
 A_ERROR_LIMIT = 0.01
+#: bayespig's RMS against the paper's Tables 1-2 where no fit reaches a bound: the paper's
+#: own figures come from a different fitter and random draws, so agreement within a factor 3
+#: (not more) is what a re-implementation can promise.
+PAPER_RMS_FACTOR = 3.0
 #: Replicates of the fast default-run studies and of the analytic method 1 check.
 N_FAST = 200
 N_METHOD1 = 20_000
@@ -117,8 +121,8 @@ def test_the_papers_findings_hold_on_the_full_study():
                 r = grid[m, a0, tau0]
                 if r.fraction_at_bound == 0 and PAPER_TAU_RMS[(m, a0, tau0)] < 1.0:
                     compared += 1
-                    assert 1 / 3 < r.tau_rms / PAPER_TAU_RMS[(m, a0, tau0)] < 3, (m, a0, tau0)
-                    assert 1 / 3 < r.a_rms / PAPER_A_RMS[(m, a0, tau0)] < 3, (m, a0, tau0)
+                    assert 1 / PAPER_RMS_FACTOR < r.tau_rms / PAPER_TAU_RMS[(m, a0, tau0)] < PAPER_RMS_FACTOR, (m, a0, tau0)
+                    assert 1 / PAPER_RMS_FACTOR < r.a_rms / PAPER_A_RMS[(m, a0, tau0)] < PAPER_RMS_FACTOR, (m, a0, tau0)
     # the comparison must not be empty: of the 18 cells of methods 2 and 4, only the tau0 = 2
     # cells with large paper errors (3 of them) or fits at a bound may be left out
     assert compared >= 12, compared
