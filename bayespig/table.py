@@ -289,7 +289,7 @@ def _build_g_slice(instrument, settings, g):
                                 e_all.reshape(flat), True)
             f_mode = mode.pop("f_mode")
         else:
-            f_mode = _mode_brdf(geometry, R_all.reshape(flat + (mu.size,)), n_weighted)
+            f_mode = surface_mode(geometry, R_all.reshape(flat + (mu.size,)), None, None, False)["f_mode"]
         f_mode = f_mode.reshape(B, n_tau + 2, theta_out.size, theta_in.size)
         weight_m = (2.0 - (m == 0)) * (-1.0) ** m
         contribution = np.empty((B, n_tau + 2, K))
@@ -351,29 +351,6 @@ def _double(R, T, direct, c, n_weighted):
     R_new = R + direct[:, :, None] * up + Tc @ up[:, :q]
     T_new = T * direct[:, None, :] + direct[:, :, None] * between + Tc @ between[:, :q]
     return R_new, T_new, direct * direct
-
-
-def _mode_brdf(geometry, R, n_weighted):
-    """BRDF mode under the surface (eq. 8) at the measurement directions, from ``R`` alone.
-
-    What :func:`~bayespig.physics.forward.surface_mode` returns as ``f_mode``, for the
-    azimuthal modes m >= 1 (which need nothing else): the system
-    ``(I - R c r_int) X = R[:, in]`` is block-triangular because the measurement
-    directions (the last nodes) have zero weight, so only its weighted block is solved
-    and only the rows of the viewing directions are formed.
-
-    Returns
-    -------
-    numpy.ndarray
-        Shape (B, k_out, k_in) [1/sr].
-    """
-    gm = geometry
-    q = n_weighted
-    coupling = (gm.c * gm.r_int)[:q]
-    X_q = np.linalg.solve(np.eye(q) - R[:, :q, :q] * coupling, R[:, :q][:, :, gm.idx_in])
-    R_out = R[:, gm.idx_out]
-    X_out = R_out[:, :, gm.idx_in] + (R_out[:, :, :q] * coupling) @ X_q
-    return gm.t_out[None, :, None] * X_out * gm.t_in[None, None, :] / (2.0 * np.pi * gm.n * gm.n)
 
 
 def _transmitted(T, e, c):

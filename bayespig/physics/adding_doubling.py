@@ -193,10 +193,18 @@ def layer_mode(mu, weight, a, tau, p_reflection, p_transmission, start_thickness
             if np.abs(T * c).sum(axis=-1).max() + direct.max() < OPAQUE_TRANSMITTANCE:
                 break
         return R, np.zeros_like(T), np.zeros_like(direct)
-    n_doublings = int(max(0, np.ceil(np.log2(max(tau.max(), 1e-300) / start_thickness))))
-    R, T, direct = start_layer(mu, c, 1.0 - a, tau / 2.0**n_doublings, p_reflection, p_transmission)
-    for _ in range(n_doublings):
-        R, T, direct = double(R, T, direct, c)
+    # each layer doubles from its own start in (start_thickness / 2, start_thickness], so its
+    # kernels do not depend on the other layers of the batch
+    n_doublings = np.ceil(np.log2(np.maximum(tau, 1e-300) / start_thickness)).clip(min=0).astype(int)
+    R = np.empty((a.size, c.size, c.size))
+    T = np.empty_like(R)
+    direct = np.empty((a.size, c.size))
+    for count in np.unique(n_doublings):
+        rows = np.flatnonzero(n_doublings == count)
+        layer = start_layer(mu, c, 1.0 - a[rows], tau[rows] / 2.0**count, p_reflection, p_transmission)
+        for _ in range(count):
+            layer = double(*layer, c)
+        R[rows], T[rows], direct[rows] = layer
     return R, T, direct
 
 

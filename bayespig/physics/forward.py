@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .adding_doubling import START_THICKNESS, START_THICKNESS_HIGHER_MODES, add_lambertian_substrate, layer_mode
+from .discrete_ordinates import SMALL_ABSORPTION, radiances_under_surface
 from .fresnel import fresnel_reflectance, normal_transmittance, refracted_cosine
 from .phase import is_rayleigh, n_fourier_modes, normalise_on_quadrature, phase_fourier_modes
 from .quadrature import DEFAULT_QUADRATURE_POINTS, binder_quadrature
@@ -31,6 +32,8 @@ __all__ = [
     "SurfaceGeometry",
     "surface_geometry",
     "surface_mode",
+    "surface_mode_eigen",
+    "mode_terms",
     "surface_terms",
     "brdf",
     "hemispherical_reflectance",
@@ -39,14 +42,16 @@ __all__ = [
     "validate_layer_arguments",
 ]
 
-#: A Fourier mode is negligible once it is this small relative to mode 1 (at the same
-#: geometry and parameters), twice in a row; modes of Henyey-Greenstein decay
+#: A Fourier mode is negligible once it is this small relative to mode 0 over black (at the
+#: same geometry and parameters), twice in a row; modes of Henyey-Greenstein decay
 #: geometrically, so the rest sums to about as much.
 MODE_TOLERANCE = 1e-6
 #: Parameter sets solved together (memory: chunk x nodes^2 x 8 bytes per kernel).
 CHUNK = 256
 #: Threads solving chunks concurrently.
 THREADS = min(2, os.cpu_count() or 1)
+#: Layer solvers of :func:`surface_terms`.
+SOLVERS = ("eigen", "doubling")
 
 
 def _check_finite(name, value):
@@ -148,7 +153,7 @@ class SurfaceTerms:
 
 
 def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=DEFAULT_QUADRATURE_POINTS,
-                  n_modes=None, start_thickness=START_THICKNESS, included_substrate=None):
+                  n_modes=None, start_thickness=START_THICKNESS, included_substrate=None, solver="eigen"):
     """Solve the layer under its surface once for a batch of (a, tau) pairs.
 
     Parameters
@@ -172,12 +177,22 @@ def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=DEFAUL
     included_substrate : array_like, optional
         Substrate albedo, shape (B,), to include *in the solve* (adding the
         substrate as a layer) instead of through eq. (3): ``f0_modes`` is then the
-        BRDF over that substrate. An independent check of the substrate law.
+        BRDF over that substrate. An independent check of the substrate law; it
+        takes the doubling path.
+    solver : {"eigen", "doubling"}
+        ``"eigen"``: the discrete-ordinate solution with the surface as its top boundary
+        (:func:`surface_mode_eigen`), one N x N solve per layer and mode; ``"doubling"``:
+        adding-doubling of the layer's kernels and the surface added by :func:`surface_mode`.
+        Both solve the same discrete equations (they agree to ~1e-8).
 
     Returns
     -------
     SurfaceTerms
     """
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    if included_substrate is not None:
+        solver = "doubling"
     geometry = surface_geometry(theta_in, theta_out, n, n_points)
     a = np.atleast_1d(np.asarray(a, dtype=float))
     tau = np.atleast_1d(np.asarray(tau, dtype=float))
@@ -194,7 +209,7 @@ def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=DEFAUL
     def solve(rows):
         substrate = None if included_substrate is None else np.asarray(included_substrate, float)[rows]
         return rows, _solve_chunk(geometry, a[rows], tau[rows], p_refl, p_trans, adaptive, start_thickness,
-                                  substrate)
+                                  substrate, solver)
 
     if len(jobs) > 1:  # numpy's batched linear algebra releases the GIL: use both cores
         with ThreadPoolExecutor(max_workers=THREADS) as pool:
@@ -236,6 +251,11 @@ class SurfaceGeometry:
     t_out: np.ndarray
     n: float
 
+    @property
+    def n_weighted(self):
+        """Number of quadrature nodes with weight; the zero-weight measurement nodes follow them."""
+        return int(np.count_nonzero(self.weight))
+
 
 def surface_geometry(theta_in, theta_out, n=1.45, n_points=DEFAULT_QUADRATURE_POINTS):
     """Quadrature with the refracted measurement directions as zero-weight nodes.
@@ -268,17 +288,65 @@ def surface_geometry(theta_in, theta_out, n=1.45, n_points=DEFAULT_QUADRATURE_PO
 
 
 def surface_mode(geometry, R, T, direct, first_mode):
-    """Add the air/binder surface (eq. 8) to one azimuthal mode of a layer.
+    """Add the air/binder surface (eq. 8) to one azimuthal mode of a layer given by its kernels.
+
+    The system ``(I - R c r_int) X = R[:, in]`` of eq. (8) is block-triangular, because the
+    measurement directions (the last nodes) have zero weight: only its weighted block is
+    solved, and the measurement rows follow as ``X = R[:, in] + R c r_int X``.
 
     Parameters
     ----------
     geometry : SurfaceGeometry
     R, T : numpy.ndarray
-        Layer kernels of this mode, shape (B, N, N) [-].
+        Layer kernels of this mode, shape (B, N, N) [-]; ``T`` is used for mode 0 only.
     direct : numpy.ndarray
-        Unscattered transmission of the layer, shape (B, N) [-].
+        Unscattered transmission of the layer, shape (B, N) [-]; mode 0 only.
     first_mode : bool
         True for mode 0, which also yields the substrate-law terms (eq. 3).
+
+    Returns
+    -------
+    dict
+        As :func:`mode_terms`.
+    """
+    gm = geometry
+    q = gm.n_weighted
+    c, r_int = gm.c[:q], gm.r_int[:q]
+    coupling = c * r_int
+    surface = np.eye(q) - R[:, :q, :q] * coupling
+    rhs = R[:, :, gm.idx_in]
+    if first_mode:
+        # the radiance from a Lambertian substrate of unit radiance shares the factorisation
+        rhs = np.concatenate([rhs, (direct + (T[:, :, :q] * c).sum(axis=-1))[:, :, None]], axis=-1)
+    solved = np.linalg.solve(surface, rhs[:, :q])
+    solved = rhs + (R[:, :, :q] * coupling) @ solved  # every row, the measurement directions included
+    if not first_mode:
+        return mode_terms(gm, solved[:, gm.idx_out], None, None, None, False)
+    # light going down at the bottom: transmitted, plus the surface's reflection transmitted
+    reflected_down = r_int[None, :, None] * solved[:, :q]
+    down = (T[:, :q, :q] * c) @ reflected_down + direct[:, :q, None] * reflected_down
+    down[..., :-1] += T[:, :q, gm.idx_in]
+    down[..., -1] += (R[:, :q, :q] * c).sum(axis=-1)  # the substrate's light reflected by the layer
+    return mode_terms(gm, solved[:, gm.idx_out], solved[:, :q], down, direct[:, gm.idx_in], True)
+
+
+def mode_terms(geometry, up_view, up, down, direct_in, first_mode):
+    """BRDF mode and substrate-law terms (eq. 3) from the radiances under the surface.
+
+    Parameters
+    ----------
+    geometry : SurfaceGeometry
+    up_view : numpy.ndarray
+        Upward radiance under the surface along the viewing directions, (B, k_out, C) [-],
+        per unit ``c I`` of a beam along each incidence direction (the first ``k_in``
+        columns) and, for mode 0, per unit radiance of the substrate (the last column).
+    up, down : numpy.ndarray
+        Mode 0: the same at the weighted nodes, upward under the surface and downward at the
+        substrate (diffuse), (B, N, C) [-].
+    direct_in : numpy.ndarray
+        Mode 0: unscattered transmission of the layer along the incidence directions, (B, k_in).
+    first_mode : bool
+        True for mode 0.
 
     Returns
     -------
@@ -287,53 +355,106 @@ def surface_mode(geometry, R, T, direct, first_mode):
         ``r_up``, ``h0``, ``t_up_hemispherical`` as in :class:`SurfaceTerms`.
     """
     gm = geometry
-    c, r_int, n = gm.c, gm.r_int, gm.n
-    # eq. (8): upgoing radiance under the surface, with reflections at its underside
-    surface = np.eye(c.size) - R * (c * r_int)
-    X = np.linalg.solve(surface, R[:, :, gm.idx_in])
-    out = {"f_mode": gm.t_out[None, :, None] * X[:, gm.idx_out, :] * gm.t_in[None, None, :] / (2.0 * np.pi * n * n)}
+    q, n = gm.n_weighted, gm.n
+    c, t_int = gm.c[:q], gm.t_int[:q]
+    k_in = gm.idx_in.size
+    out = {"f_mode": gm.t_out[None, :, None] * up_view[..., :k_in] * gm.t_in[None, None, :] / (2.0 * np.pi * n * n)}
     if not first_mode:
         return out
-    # eq. (3) terms: irradiance reaching the substrate ...
-    reflected_down = r_int[None, :, None] * X
-    down_diffuse = T[:, :, gm.idx_in] + (T * c) @ reflected_down + direct[:, :, None] * reflected_down
-    out["t_down"] = gm.t_in * (direct[:, gm.idx_in] + np.einsum("j,bjk->bk", c, down_diffuse))
-    # ... radiance from a Lambertian substrate of unit radiance, under the surface ...
-    up = np.linalg.solve(surface, (direct + (T * c).sum(axis=-1))[:, :, None])[..., 0]
-    out["t_up"] = gm.t_out * up[:, gm.idx_out] / (n * n * np.pi)
-    # ... and what of it the layer and the surface send back to the substrate
-    back = (R * c).sum(axis=-1) + np.einsum("bij,bj->bi", T * c, r_int * up) + direct * r_int * up
-    out["r_up"] = 2.0 * back @ c
-    out["h0"] = gm.t_in * np.einsum("j,bjk->bk", c * gm.t_int, X)
-    out["t_up_hemispherical"] = 2.0 * (up @ (c * gm.t_int))
+    out["t_down"] = gm.t_in * (direct_in + np.einsum("j,bjk->bk", c, down[..., :k_in]))
+    out["t_up"] = gm.t_out * up_view[..., -1] / (n * n * np.pi)
+    out["r_up"] = 2.0 * down[..., -1] @ c
+    out["h0"] = gm.t_in * np.einsum("j,bjk->bk", c * t_int, up[..., :k_in])
+    out["t_up_hemispherical"] = 2.0 * (up[..., -1] @ (c * t_int))
     return out
 
 
-def _solve_chunk(geometry, a, tau, p_refl, p_trans, adaptive, start_thickness, included_substrate):
-    """Adding–doubling plus the surface (eq. 8) and substrate-law terms (eq. 3) for one chunk."""
+def surface_mode_eigen(geometry, a, tau, p_reflection, p_transmission, first_mode, start_thickness):
+    """:func:`surface_mode` without forming the layer's kernels: the discrete-ordinate solution
+    with the surface as the top boundary (:func:`~bayespig.physics.discrete_ordinates.radiances_under_surface`).
+
+    Layers with ``a <`` :data:`~bayespig.physics.discrete_ordinates.SMALL_ABSORPTION` (the
+    eigen form degenerates as ``a -> 0``) or ``tau = 0`` go through doubling and
+    :func:`surface_mode`.
+
+    Parameters
+    ----------
+    geometry : SurfaceGeometry
+    a, tau : numpy.ndarray
+        Relative absorption and optical thickness, (B,) [-]; ``tau`` all finite or all ``inf``.
+    p_reflection, p_transmission : numpy.ndarray
+        This mode of the phase function on the geometry's nodes, (N, N) [-].
+    first_mode : bool
+        True for mode 0.
+    start_thickness : float
+        Start of the doubling for the layers that take that path [-].
+
+    Returns
+    -------
+    dict
+        As :func:`mode_terms`.
+    """
+    gm = geometry
+    doubled = (a < SMALL_ABSORPTION) | (tau == 0.0)
+    parts = []
+    if doubled.any():
+        R, T, direct = layer_mode(gm.mu, gm.weight, a[doubled], tau[doubled], p_reflection, p_transmission,
+                                  start_thickness)
+        parts.append((doubled, surface_mode(gm, R, T, direct, first_mode)))
+    if not doubled.all():
+        rows = ~doubled
+        rad = radiances_under_surface(gm.mu, gm.weight, a[rows], tau[rows], p_reflection, p_transmission,
+                                      gm.r_int[: gm.n_weighted], gm.idx_in, gm.idx_out, substrate=first_mode)
+        direct_in = np.exp(-tau[rows, None] / gm.mu[gm.idx_in]) if first_mode else None
+        parts.append((rows, mode_terms(gm, rad["up_view"], rad["up"], rad["down"], direct_in, first_mode)))
+    if len(parts) == 1:
+        return parts[0][1]
+    out = {}
+    for rows, part in parts:
+        for key, value in part.items():
+            if key not in out:
+                out[key] = np.empty((a.size,) + value.shape[1:])
+            out[key][rows] = value
+    return out
+
+
+def _solve_chunk(geometry, a, tau, p_refl, p_trans, adaptive, start_thickness, included_substrate, solver):
+    """Layer, surface (eq. 8) and substrate-law terms (eq. 3), mode by mode, for one chunk.
+
+    Each value (parameter set x geometry) stops at its own converged mode: after two modes in
+    a row below ``MODE_TOLERANCE`` of its mode 0 over black (the azimuthal mean, which bounds
+    every mode of a positive BRDF), so a result never depends on which other parameter sets
+    or geometries share the call, nor on whether the substrate enters by eq. (3) or by a
+    direct solve. Parameter sets whose values have all stopped are not solved further.
+    """
     f_modes = []
     terms = {}
-    # each value (parameter set x geometry) stops at its own converged mode, so a result
-    # never depends on which other parameter sets or geometries share the call
-    quiet = None
-    n_used = None
-    for m in range(p_refl.shape[0]):
+    n_max = p_refl.shape[0]
+    for m in range(n_max):
         thickness = start_thickness if m == 0 else max(start_thickness, START_THICKNESS_HIGHER_MODES)
-        R, T, direct = layer_mode(geometry.mu, geometry.weight, a, tau, p_refl[m], p_trans[m], thickness)
-        if m == 0 and included_substrate is not None:
-            R = add_lambertian_substrate(R, T, direct, geometry.c, included_substrate)
-        mode = surface_mode(geometry, R, T, direct, m == 0)
-        f_modes.append(mode.pop("f_mode"))
+        rows = slice(None) if m == 0 else np.flatnonzero((n_used > m).any(axis=(1, 2)))
+        if solver == "eigen":
+            mode = surface_mode_eigen(geometry, a[rows], tau[rows], p_refl[m], p_trans[m], m == 0, thickness)
+        else:
+            R, T, direct = layer_mode(geometry.mu, geometry.weight, a[rows], tau[rows], p_refl[m], p_trans[m],
+                                      thickness)
+            if m == 0 and included_substrate is not None:
+                scale = surface_mode(geometry, R, None, None, False)["f_mode"]
+                R = add_lambertian_substrate(R, T, direct, geometry.c, included_substrate)
+            mode = surface_mode(geometry, R, T, direct, m == 0)
+        f_mode = mode.pop("f_mode")
         if m == 0:
             terms.update(mode)
-            quiet = np.zeros(f_modes[0].shape, dtype=int)
-            n_used = np.full(f_modes[0].shape, p_refl.shape[0])
-        elif m == 1:
-            # modes >= 1 do not see the substrate: measuring them against mode 1 makes the
-            # truncation the same whether the substrate enters by eq. (3) or by a direct solve
-            reference = np.maximum(np.abs(f_modes[1]), 1e-300)
-        elif adaptive:
-            small = np.abs(f_modes[-1]) / reference < MODE_TOLERANCE
+            scale = np.abs(f_mode if included_substrate is None else scale)
+            f_modes.append(f_mode)
+            quiet = np.zeros(f_mode.shape, dtype=int)
+            n_used = np.full(f_mode.shape, n_max)
+            continue
+        full = np.zeros_like(f_modes[0])
+        full[rows] = f_mode
+        f_modes.append(full)
+        if adaptive:
+            small = np.abs(full) <= MODE_TOLERANCE * scale
             quiet = np.where(small, quiet + 1, 0)
             n_used = np.where((quiet == 2) & (n_used > m), m + 1, n_used)
             if (n_used <= m + 1).all():

@@ -1,4 +1,4 @@
-"""The discrete-ordinate eigen layer (groundwork for issue 2) against the doubling solver.
+"""The discrete-ordinate eigen layer (the forward model's layer solver) against the doubling solver.
 
 Reference: :func:`bayespig.physics.adding_doubling.layer_mode` on the same quadrature and
 phase-function modes (itself checked against the H-function, van de Hulst's tables and
@@ -11,6 +11,7 @@ import pytest
 
 from bayespig.physics.adding_doubling import layer_mode
 from bayespig.physics.discrete_ordinates import SMALL_ABSORPTION, layer_mode_eigen
+from bayespig.physics.fresnel import refracted_cosine
 from bayespig.physics.phase import normalise_on_quadrature, phase_fourier_modes
 from bayespig.physics.quadrature import binder_quadrature
 
@@ -57,11 +58,60 @@ def test_eigen_layer_equals_doubling(g, mode, opaque):
         assert _close(T_e, T_d) < SAME_EQUATIONS_REL_TOL
 
 
-def test_eigen_layer_refuses_zero_weight_nodes_and_mixed_batches():
+#: Measurement directions refracted into the binder (n = 1.45) from these air angles [deg], as
+#: zero-weight nodes: normal incidence, the sphere's 8 deg, the multi-angle set, and grazing.
+EXACT_AIR_ANGLES = (0.0, 8.0, 20.0, 45.0, 65.0, 89.0)
+
+
+@pytest.mark.parametrize("g, mode", [(0.0, 0), (0.5, 0), (0.5, 1), (0.5, 6), (-0.3, 2), (5.0, 2)])
+@pytest.mark.parametrize("opaque", [False, True])
+def test_exact_directions_equal_doubling(g, mode, opaque):
+    """Zero-weight rows and columns (beam particular solution, formal integration) against
+    doubling, which carries such nodes through its matrix recurrences unchanged."""
+    extra = refracted_cosine(np.cos(np.radians(EXACT_AIR_ANGLES)), 1.0, 1.45)
+    mu, weight = binder_quadrature(8, 1.45, extra_nodes=extra)
+    p_r, p_t = _modes(mu, weight, g, mode + 1)
+    rng = np.random.default_rng(11)
+    a = np.concatenate([[0.0, 0.5 * SMALL_ABSORPTION, 2 * SMALL_ABSORPTION, 1.0], rng.uniform(0.0, 1.0, 12)])
+    # thin to thick, and a layer as thick as the resonance tau k = tau / mu makes sharpest
+    tau = np.full(a.size, np.inf) if opaque else np.exp(rng.uniform(np.log(1e-3), np.log(100.0), a.size))
+    R_e, T_e, _ = layer_mode_eigen(mu, weight, a, tau, p_r[mode], p_t[mode])
+    R_d, T_d, _ = layer_mode(mu, weight, a, tau, p_r[mode], p_t[mode])
+    exact = slice(-extra.size, None)
+    for name, eigen, doubling in (("R", R_e, R_d), ("T", T_e, T_d)):
+        if opaque and name == "T":
+            assert not eigen.any()
+            continue
+        scale = np.abs(doubling).max()
+        for block in ((exact, exact), (exact, slice(None)), (slice(None), exact)):
+            difference = np.abs(eigen[(slice(None),) + block] - doubling[(slice(None),) + block]).max()
+            assert difference < SAME_EQUATIONS_REL_TOL * scale, (name, block, difference / scale)
+
+
+def test_exact_direction_kernels_are_reciprocal():
+    """``R`` and ``T`` of a homogeneous layer are symmetric (reciprocity) on every node; the
+    zero-weight columns come from the beam solution and the zero-weight rows (quadrature
+    columns) from the quadrature rows by that symmetry, but the zero-weight block from two
+    independent integrations: check it."""
+    extra = refracted_cosine(np.cos(np.radians(EXACT_AIR_ANGLES)), 1.0, 1.45)
+    mu, weight = binder_quadrature(8, 1.45, extra_nodes=extra)
+    p_r, p_t = _modes(mu, weight, 0.5, 2)
+    a = np.array([0.01, 0.3, 0.9])
+    R, T, _ = layer_mode_eigen(mu, weight, a, np.array([0.05, 1.0, 7.0]), p_r[1], p_t[1])
+    block = slice(-extra.size, None)
+    for K in (R, T):
+        np.testing.assert_allclose(K[:, block, block], np.swapaxes(K[:, block, block], 1, 2),
+                                   rtol=SAME_EQUATIONS_REL_TOL, atol=NEGLIGIBLE * np.abs(K).max())
+
+
+def test_eigen_layer_refuses_bad_weights_and_mixed_batches():
     mu, weight = binder_quadrature(4, 1.45, extra_nodes=(0.7,))
     p_r, p_t = _modes(mu, weight, 0.0, 1)
-    with pytest.raises(ValueError, match="positive quadrature weights"):
-        layer_mode_eigen(mu, weight, np.array([0.1]), np.array([1.0]), p_r[0], p_t[0])
+    with pytest.raises(ValueError, match="must follow the quadrature nodes"):
+        layer_mode_eigen(mu[::-1], weight[::-1], np.array([0.1]), np.array([1.0]), p_r[0][::-1, ::-1],
+                         p_t[0][::-1, ::-1])
+    with pytest.raises(ValueError, match=">= 0"):
+        layer_mode_eigen(mu, -weight, np.array([0.1]), np.array([1.0]), p_r[0], p_t[0])
     mu, weight = binder_quadrature(4, 1.45)
     p_r, p_t = _modes(mu, weight, 0.0, 1)
     with pytest.raises(ValueError, match="all finite or all infinite"):
