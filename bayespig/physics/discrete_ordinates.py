@@ -48,6 +48,9 @@ __all__ = ["SMALL_ABSORPTION", "layer_mode_eigen"]
 #: Below this relative absorption the diffusion mode's ``k ~ sqrt(3 a)`` nears 0 and the eigen
 #: form loses accuracy; such layers go through doubling.
 SMALL_ABSORPTION = 1e-4
+#: Attenuation factors ``e^{-k tau}`` below this are set to zero (their products would be
+#: subnormal numbers, slow to compute with, and they are far below any accuracy that matters).
+NEGLIGIBLE_ATTENUATION = 1e-100
 
 
 def _eigen_solutions(mu, weight, a, p_reflection, p_transmission):
@@ -357,9 +360,10 @@ def radiances_under_surface(mu, weight, a, tau, p_reflection, p_transmission, r_
     Returns
     -------
     dict
-        ``up`` (B, N, C): upward radiance under the top at the weighted nodes; ``up_view``
-        (B, L_views, C): the same along ``views``; ``down`` (B, N, C): diffuse downward
-        radiance at the bottom. Columns C: the beams, then the substrate problem.
+        ``up_view`` (B, L_views, C): upward radiance under the top along ``views``; with
+        ``substrate`` also ``up`` (B, N, C), the same at the weighted nodes, and ``down``
+        (B, N, C), the diffuse downward radiance at the bottom (else None). Columns C: the
+        beams, then the substrate problem.
     """
     a = np.atleast_1d(np.asarray(a, dtype=float))
     tau = np.atleast_1d(np.asarray(tau, dtype=float))
@@ -411,23 +415,32 @@ def radiances_under_surface(mu, weight, a, tau, p_reflection, p_transmission, r_
         return {"up": up, "up_view": up_view[which], "down": down}
     # per row: the beams' attenuation e^{-tau/u} scales g and Z+ at the bottom
     E = np.exp(-tau[:, None] * k[which])  # (B, N)
+    # below ~1e-100 a factor is zero to any accuracy: flushing it keeps E P E and the products
+    # that follow out of the subnormal range, where arithmetic is ~100 times slower
+    E[E < NEGLIGIBLE_ATTENUATION] = 0.0
     beam = np.exp(-tau[:, None] / u)  # (B, L)
     scale = np.concatenate([beam, np.ones((tau.size, g.shape[-1] - n_beams))], axis=-1)[:, None, :]
-    g_rows = g[which] * scale
-    U_inv_g = U_inv[which] @ g_rows
-    EPE = E[:, :, None] * P[which] * E[:, None, :]
+    U_inv_g = U_inv[which] @ (g[which] * scale)
+    # (B, N, N) temporaries dominate the cost: few of them, updated in place
+    P_b = P[which]
+    EPE = P_b * E[:, :, None]
+    EPE *= E[:, None, :]
     W_r_b = W_r[which]
-    alpha = np.linalg.solve(U_r[which] - W_r_b @ EPE, f[which] - W_r_b @ (E[:, :, None] * U_inv_g))
-    beta = U_inv_g - P[which] @ (E[:, :, None] * alpha)
-    Ub, Wb = U[which], W[which]
-    z_up_b = z_up[which]
-    zeros = np.zeros((tau.size, n, g.shape[-1] - n_beams))
-    up = np.concatenate([z_up_b, zeros], axis=-1) + Wb @ alpha + Ub @ (E[:, :, None] * beta)
-    down = np.concatenate([z_down[which] * beam[:, None, :], zeros], axis=-1) + Ub @ (E[:, :, None] * alpha) + Wb @ beta
+    system = W_r_b @ EPE
+    np.subtract(U_r[which], system, out=system)
+    rhs = f[which]
+    rhs -= W_r_b @ (E[:, :, None] * U_inv_g)
+    alpha = np.linalg.solve(system, rhs)
+    beta = U_inv_g - P_b @ (E[:, :, None] * alpha)
     t = tau[:, None, None]
     up_view = _up_at_exact_directions(up_decaying[which], down_decaying[which], alpha, beta, k[which][:, None, :], t,
                                       inv_mu, False)
     up_view[..., :n_beams] += inv_mu * up_particular[which] * _layer_integral(rate_beam + inv_mu, np.zeros(1), t)
-    if substrate:
-        up_view[..., n_beams:] += np.exp(-t / mu[views][None, :, None])  # the bottom seen through the layer
+    if not substrate:
+        return {"up": None, "up_view": up_view, "down": None}
+    up_view[..., n_beams:] += np.exp(-t / mu[views][None, :, None])  # the bottom seen through the layer
+    Ub, Wb = U[which], W[which]
+    zeros = np.zeros((tau.size, n, g.shape[-1] - n_beams))
+    up = np.concatenate([z_up[which], zeros], axis=-1) + Wb @ alpha + Ub @ (E[:, :, None] * beta)
+    down = np.concatenate([z_down[which] * beam[:, None, :], zeros], axis=-1) + Ub @ (E[:, :, None] * alpha) + Wb @ beta
     return {"up": up, "up_view": up_view, "down": down}
