@@ -84,7 +84,7 @@ def main(argv=None):
     say(f"load average at end {load_average()}")
     if args.no_write:
         return 0
-    write_run_section(SECTION, "/tmp/venv/bin/python benchmarks/layer_solvers.py", [
+    write_run_section(SECTION, "python benchmarks/layer_solvers.py", [
         "Layer kernels (no surface, no measurement nodes) on the default binder quadrature over the",
         "forward benchmark's 64 x 64 (a, tau) grid: adding-doubling (`layer_mode`, what the forward",
         "model uses) against the discrete-ordinate eigen solution (`layer_mode_eigen`, issue 2",

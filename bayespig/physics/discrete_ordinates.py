@@ -51,6 +51,8 @@ SMALL_ABSORPTION = 1e-4
 #: Attenuation factors ``e^{-k tau}`` below this are set to zero (their products would be
 #: subnormal numbers, slow to compute with, and they are far below any accuracy that matters).
 NEGLIGIBLE_ATTENUATION = 1e-100
+#: Layers solved together in :func:`radiances_under_surface` (cache-sized blocks).
+ROW_BLOCK = 32
 
 
 def _eigen_solutions(mu, weight, a, p_reflection, p_transmission):
@@ -292,6 +294,21 @@ def _exact_direction_kernels(mu, weight, n, distinct, which, tau, U, W, k, U_inv
     return np.concatenate([R_q, R_zz], axis=1), np.concatenate([T_q, T_zz], axis=1)
 
 
+def _growing_integral(e_view, e_mode, rate_difference, tau):
+    """``int_0^tau e^{-t/mu} e^{-k (tau - t)} dt = (e^{-tau/mu} - e^{-k tau}) / (k - 1/mu)`` [-].
+
+    From the attenuations ``e_view = e^{-tau/mu}`` and ``e_mode = e^{-k tau}`` already at hand,
+    with ``rate_difference = k - 1/mu``; near the resonance ``k = 1/mu`` (``|x| = |k - 1/mu| tau
+    < 1e-3``) as ``tau e^{-tau/mu} (1 - e^{-x}) / x`` by its Taylor series (error ~x^4/120).
+    Arrays broadcast.
+    """
+    x = rate_difference * tau
+    near = np.abs(x) < 1e-3
+    safe = np.where(near, 1.0, rate_difference)
+    series = tau * e_view * (1.0 - x / 2.0 + x * x / 6.0 - x * x * x / 24.0)
+    return np.where(near, series, (e_view - e_mode) / safe)
+
+
 def _up_at_exact_directions(up_decaying, down_decaying, alpha, beta, k, tau, inv_mu, opaque):
     """Upward radiance leaving the top along exact directions from the homogeneous solutions.
 
@@ -413,15 +430,35 @@ def radiances_under_surface(mu, weight, a, tau, p_reflection, p_transmission, r_
         if substrate:  # nothing reaches the bottom; what it would send up comes back as R c 1
             down[..., -1] = (W @ U_inv.sum(axis=-1)[..., None])[which, :, 0]
         return {"up": up, "up_view": up_view[which], "down": down}
-    # per row: the beams' attenuation e^{-tau/u} scales g and Z+ at the bottom
+    n_views, n_columns = inv_mu.size, g.shape[-1]
+    out = {"up_view": np.empty((tau.size, n_views, n_columns))}
+    if substrate:
+        out["up"] = np.empty((tau.size, n, n_columns))
+        out["down"] = np.empty((tau.size, n, n_columns))
+    # per row, in blocks small enough for the core's cache (a block's (B, N, N) arrays, ~0.25 MB
+    # each at N = 32, run 2-3 times faster than the same work on 256 rows at once)
+    for start in range(0, tau.size, ROW_BLOCK):
+        rows = slice(start, start + ROW_BLOCK)
+        block = _rows_under_surface(which[rows], tau[rows], k, U, W, U_inv, P, U_r, W_r, f, g, z_down, z_up, u,
+                                    up_decaying, down_decaying, up_particular, 1.0 / mu[views], substrate)
+        for key, value in block.items():
+            out[key][rows] = value
+    return {"up": out.get("up"), "up_view": out["up_view"], "down": out.get("down")}
+
+
+def _rows_under_surface(which, tau, k, U, W, U_inv, P, U_r, W_r, f, g, z_down, z_up, u, up_decaying, down_decaying,
+                        up_particular, inv_mu_view, substrate):
+    """The per-layer part of :func:`radiances_under_surface` for finite layers ``tau`` (B,), whose
+    distinct-``a`` quantities are picked by ``which``: the N x N solve for ``alpha``, then
+    ``beta`` and the radiances."""
+    n_beams = u.size
     E = np.exp(-tau[:, None] * k[which])  # (B, N)
     # below ~1e-100 a factor is zero to any accuracy: flushing it keeps E P E and the products
     # that follow out of the subnormal range, where arithmetic is ~100 times slower
     E[E < NEGLIGIBLE_ATTENUATION] = 0.0
-    beam = np.exp(-tau[:, None] / u)  # (B, L)
+    beam = np.exp(-tau[:, None] / u)  # (B, L): the beams' attenuation scales g (and Z+ at the bottom)
     scale = np.concatenate([beam, np.ones((tau.size, g.shape[-1] - n_beams))], axis=-1)[:, None, :]
     U_inv_g = U_inv[which] @ (g[which] * scale)
-    # (B, N, N) temporaries dominate the cost: few of them, updated in place
     P_b = P[which]
     EPE = P_b * E[:, :, None]
     EPE *= E[:, None, :]
@@ -432,15 +469,20 @@ def radiances_under_surface(mu, weight, a, tau, p_reflection, p_transmission, r_
     rhs -= W_r_b @ (E[:, :, None] * U_inv_g)
     alpha = np.linalg.solve(system, rhs)
     beta = U_inv_g - P_b @ (E[:, :, None] * alpha)
-    t = tau[:, None, None]
-    up_view = _up_at_exact_directions(up_decaying[which], down_decaying[which], alpha, beta, k[which][:, None, :], t,
-                                      inv_mu, False)
-    up_view[..., :n_beams] += inv_mu * up_particular[which] * _layer_integral(rate_beam + inv_mu, np.zeros(1), t)
+    # formal integration along the viewing directions, from the attenuations already at hand
+    e_view = np.exp(-tau[:, None] * inv_mu_view)  # (B, L_views)
+    k_b = k[which][:, None, :]
+    inv_mu = inv_mu_view[None, :, None]
+    decaying = (1.0 - E[:, None, :] * e_view[:, :, None]) / (k_b + inv_mu)
+    growing = _growing_integral(e_view[:, :, None], E[:, None, :], k_b - inv_mu, tau[:, None, None])
+    up_view = inv_mu * ((up_decaying[which] * decaying) @ alpha + (down_decaying[which] * growing) @ beta)
+    up_view[..., :n_beams] += (inv_mu * up_particular[which] * (1.0 - e_view[:, :, None] * beam[:, None, :])
+                               / (inv_mu + 1.0 / u))
     if not substrate:
-        return {"up": None, "up_view": up_view, "down": None}
-    up_view[..., n_beams:] += np.exp(-t / mu[views][None, :, None])  # the bottom seen through the layer
+        return {"up_view": up_view}
+    up_view[..., n_beams:] += e_view[:, :, None]  # the bottom seen through the layer
     Ub, Wb = U[which], W[which]
-    zeros = np.zeros((tau.size, n, g.shape[-1] - n_beams))
+    zeros = np.zeros((tau.size, E.shape[1], g.shape[-1] - n_beams))
     up = np.concatenate([z_up[which], zeros], axis=-1) + Wb @ alpha + Ub @ (E[:, :, None] * beta)
     down = np.concatenate([z_down[which] * beam[:, None, :], zeros], axis=-1) + Ub @ (E[:, :, None] * alpha) + Wb @ beta
-    return {"up": up, "up_view": up_view, "down": down}
+    return {"up_view": up_view, "up": up, "down": down}
