@@ -2,8 +2,8 @@
 
 Run from the repository root::
 
-    /tmp/venv/bin/python benchmarks/design.py            # prints; updates reports/benchmarks.md
-    /tmp/venv/bin/python benchmarks/design.py --no-write # prints only
+    python benchmarks/design.py            # prints; updates reports/benchmarks.md
+    python benchmarks/design.py --no-write # prints only
 
 Ranks the first 100 candidates of ``candidate_designs([5, 10, 20, 40] um, black/white/grey 0.3,
 multi-angle-45 and 8d-sci)`` by the Fisher information of eq. (7) at 32 prior draws x 31 bands
@@ -63,7 +63,7 @@ def main(argv=None):
     if not args.no_write:
         body = "\n".join([
             SECTION, "",
-            ("Regenerate: `/tmp/venv/bin/python benchmarks/design.py` "
+            ("Regenerate: `python benchmarks/design.py` "
              f"(bayespig {bayespig.__version__}, numpy {np.__version__}, "
              f"Python {platform.python_version()})."),
             "",

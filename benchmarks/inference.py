@@ -2,8 +2,8 @@
 
 Run from the repository root::
 
-    /tmp/venv/bin/python benchmarks/inference.py            # prints; updates reports/benchmarks.md
-    /tmp/venv/bin/python benchmarks/inference.py --no-write # prints only
+    python benchmarks/inference.py            # prints; updates reports/benchmarks.md
+    python benchmarks/inference.py --no-write # prints only
 
 Measures, for method 4 (one film on black and on white, 2 samples x 6 geometries of the
 ``multi-angle-45`` instrument, a0 = 0.1, tau0 = 1, eps = 0.05):
@@ -305,7 +305,7 @@ def main(argv=None):
             "",
             "![autocorrelation of a per move mixture](inference-moves.png)",
         ]
-    write_run_section(SECTION, "/tmp/venv/bin/python benchmarks/inference.py", description, lines, after)
+    write_run_section(SECTION, "python benchmarks/inference.py", description, lines, after)
     return 0
 
 

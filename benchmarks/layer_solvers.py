@@ -1,12 +1,13 @@
-"""Benchmark: layer kernels by doubling vs the discrete-ordinate eigen solution (issue 2 groundwork).
+"""Benchmark: layer kernels by doubling vs the discrete-ordinate eigen solution.
 
 Run from the repository root::
 
-    /tmp/venv/bin/python benchmarks/layer_solvers.py
+    python benchmarks/layer_solvers.py
 
-Times :func:`bayespig.physics.adding_doubling.layer_mode` (what the forward model uses) and
+Times :func:`bayespig.physics.adding_doubling.layer_mode` (the table builder's solver) and
 :func:`bayespig.physics.discrete_ordinates.layer_mode_eigen` (one eigen decomposition per
-``a``, closed form per ``tau``; not yet used by the forward model, see its module docstring) on
+``a``, closed form per ``tau``; the forward model solves the same equations without forming
+kernels, see ``benchmarks/forward.py``) on
 the default binder quadrature (no measurement nodes) over the forward benchmark's 64 x 64
 (a, tau) grid (``benchmarks/forward.py``), for the isotropic mode and for the modes of
 Henyey-Greenstein g = 0.5, and prints the largest difference of the reflection and
@@ -86,10 +87,10 @@ def main(argv=None):
         return 0
     write_run_section(SECTION, "python benchmarks/layer_solvers.py", [
         "Layer kernels (no surface, no measurement nodes) on the default binder quadrature over the",
-        "forward benchmark's 64 x 64 (a, tau) grid: adding-doubling (`layer_mode`, what the forward",
-        "model uses) against the discrete-ordinate eigen solution (`layer_mode_eigen`, issue 2",
-        "groundwork, not yet used by the forward model: the zero-weight measurement directions need",
-        "the formal integration of the source function).",
+        "forward benchmark's 64 x 64 (a, tau) grid: adding-doubling (`layer_mode`, the table",
+        "builder's solver) against the discrete-ordinate eigen solution (`layer_mode_eigen`). The",
+        "forward model solves the same equations as a boundary-value problem under the surface",
+        "(`radiances_under_surface`), timed in the section \"Forward model\".",
     ], lines)
     return 0
 

@@ -2,9 +2,9 @@
 
 Run from the repository root::
 
-    /tmp/venv/bin/python benchmarks/robustness.py            # prints; updates reports/benchmarks.md
-    /tmp/venv/bin/python benchmarks/robustness.py --no-write # prints only
-    /tmp/venv/bin/python benchmarks/robustness.py --dask     # also through a local dask cluster
+    python benchmarks/robustness.py            # prints; updates reports/benchmarks.md
+    python benchmarks/robustness.py --no-write # prints only
+    python benchmarks/robustness.py --dask     # also through a local dask cluster
 
 Times the paper's study (4 methods x 9 (a0, tau0) pairs x 1000 noisy replicates, eps = 0.05,
 instrument "multi-angle-45"; goal <= 20 s on 2 cores) with the default executor (a local pool
@@ -140,7 +140,7 @@ def main(argv=None):
                 f"| {verdict} |"
             ),
         ]
-        write_run_section(SECTION, "/tmp/venv/bin/python benchmarks/robustness.py", description, lines, after)
+        write_run_section(SECTION, "python benchmarks/robustness.py", description, lines, after)
     return 0
 
 

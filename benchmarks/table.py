@@ -2,8 +2,8 @@
 
 Run from the repository root::
 
-    /tmp/venv/bin/python benchmarks/table.py            # everything (several minutes)
-    /tmp/venv/bin/python benchmarks/table.py --skip-g   # isotropic tables only (~1 minute)
+    python benchmarks/table.py            # everything (several minutes)
+    python benchmarks/table.py --skip-g   # isotropic tables only (~1 minute)
 
 Prints
 

@@ -1,4 +1,4 @@
-"""Closed-form layer kernels from the discrete-ordinate eigen solution (an alternative to doubling).
+"""The discrete-ordinate solution of a homogeneous layer (the forward model's layer solver).
 
 The kernels of :mod:`bayespig.physics.adding_doubling` solve, on the same quadrature, the
 discrete radiative transfer equation of one azimuthal mode
@@ -11,29 +11,32 @@ limit is the single-scattering kernel). With ``A = M^-1 (omega/2 pT W - 1)`` and
 ``B = M^-1 (omega/2 pR W)`` the sum ``Z = I+ + I-`` obeys ``Z'' = (A - B)(A + B) Z``; its
 eigenvectors ``V`` and eigenvalues ``k^2`` give the decaying solutions ``(U, W) e^{-k tau}``
 with ``U = (V + Y) / 2``, ``W = (V - Y) / 2``, ``Y = -(A - B)^-1 V k``, and by symmetry the
-growing ones ``(W, U) e^{-k (tau0 - tau)}``. The boundary conditions of a slab lit from above
-(``I+(0) = f``, ``I-(tau0) = 0``) then give, with ``E = diag e^{-k tau0}`` and ``P = U^-1 W``,
+growing ones ``(W, U) e^{-k (tau0 - tau)}`` (Stamnes & Swanson 1981). One eigen decomposition
+per (``a``, mode) serves every thickness.
 
-    R = (W - U E P E) (U - W E P E)^-1,     T = (U - W P) E (U - W E P E)^-1,
+Two uses:
 
-and the semi-infinite layer ``R = W U^-1`` (Stamnes & Swanson 1981; Flatau & Stephens 1988).
-One eigen decomposition per (``a``, mode) serves every ``tau``: a further thickness costs two
-N x N products and one solve instead of ~25 doublings (``benchmarks/layer_solvers.py``).
-
-Status: groundwork for issue 2's speed goal, not yet used by the forward model. The operator
-form needs positive weights: a zero-weight node (an exact measurement direction) as the
-*incident* direction carries no flux in it, so its kernel column needs the particular solution
-of a collimated beam, and as an outgoing direction it resonates with its own decoupled eigen
-direction (``k = 1/mu``); both call for the formal integration of the source function
-(DISORT's intensities at arbitrary angles), which is not written yet.
+- :func:`layer_mode_eigen`: the layer's reflection and transmission kernels on the quadrature,
+  ``R = (W - U E P E) (U - W E P E)^-1``, ``T = (U - W P) E (U - W E P E)^-1`` with
+  ``E = diag e^{-k tau0}``, ``P = U^-1 W``, and ``R = W U^-1`` when opaque (Flatau & Stephens
+  1988); a cross-check of doubling (``benchmarks/layer_solvers.py``).
+- :func:`radiances_under_surface`: what the forward model needs of one mode, the radiance under
+  the air/binder surface along the exact measurement directions, solved directly as a
+  boundary-value problem with the surface's internal reflection as the top boundary
+  (DISORT's method, Stamnes et al. 1988): a collimated beam along an exact incidence direction
+  enters through the particular solution ``Z e^{-tau/u}``, and the radiance along an exact
+  viewing direction follows from integrating the source function along it. No kernel matrix
+  is formed; each layer costs one N x N solve per mode.
 
 The conservative limit ``a -> 0`` makes the smallest ``k`` vanish (the diffusion mode, linear
-in ``tau``), where this form degenerates: :func:`layer_mode_eigen` therefore hands ``a <``
-:data:`SMALL_ABSORPTION` to the doubling solver.
+in ``tau``), where this form degenerates: such layers (``a <`` :data:`SMALL_ABSORPTION`) go
+through doubling.
 
 References
 ----------
 Stamnes & Swanson (1981), J. Atmos. Sci. 38, 387 (the reduced eigenproblem);
+Stamnes, Tsay, Wiscombe & Jayaweera (1988), Appl. Opt. 27, 2502 (DISORT: beam particular
+solution, intensities at arbitrary angles);
 Flatau & Stephens (1988), J. Geophys. Res. 93, 11037 (layer reflection and transmission).
 """
 
@@ -43,7 +46,7 @@ import numpy as np
 
 from .adding_doubling import START_THICKNESS, layer_mode
 
-__all__ = ["SMALL_ABSORPTION", "layer_mode_eigen"]
+__all__ = ["SMALL_ABSORPTION", "layer_mode_eigen", "radiances_under_surface"]
 
 #: Below this relative absorption the diffusion mode's ``k ~ sqrt(3 a)`` nears 0 and the eigen
 #: form loses accuracy; such layers go through doubling.
@@ -53,6 +56,15 @@ SMALL_ABSORPTION = 1e-4
 NEGLIGIBLE_ATTENUATION = 1e-100
 #: Layers solved together in :func:`radiances_under_surface` (cache-sized blocks).
 ROW_BLOCK = 32
+#: A beam whose rate ``1/u`` lies within this relative distance of an eigenvalue ``k`` is near
+#: the resonance of its particular solution (error ~3e-14 / distance).
+RESONANCE_GAP = 1e-3
+#: Relative steps of the beam's attenuation rate around a resonance: the radiances, smooth in
+#: the rate, are extrapolated from rates ``(1 +- STEP) / u`` and ``(1 +- 2 STEP) / u``.
+RESONANCE_STEP = 4e-3
+#: Richardson weights of those four rates (error O(STEP^4)).
+RESONANCE_WEIGHTS = np.array([2.0 / 3.0, 2.0 / 3.0, -1.0 / 6.0, -1.0 / 6.0])
+RESONANCE_FACTORS = 1.0 + RESONANCE_STEP * np.array([1.0, -1.0, 2.0, -2.0])
 
 
 def _eigen_solutions(mu, weight, a, p_reflection, p_transmission):
@@ -83,217 +95,6 @@ def _eigen_solutions(mu, weight, a, p_reflection, p_transmission):
     return 0.5 * (V + Y), 0.5 * (V - Y), k
 
 
-def _layer_integral(rate_top, rate_bottom, tau):
-    """``int_0^tau exp(-rate_top t - rate_bottom (tau - t)) dt`` for rates ``>= 0`` [-].
-
-    Stable for equal rates (the resonance ``k = 1/mu`` of the formal integration), where it is
-    ``tau exp(-rate tau)``: written as ``tau e^-lo (1 - e^-d) / d`` with ``lo`` the smaller
-    exponent and ``d`` the difference of the two. Arrays broadcast; ``tau`` finite.
-    """
-    p = rate_top * tau
-    q = rate_bottom * tau
-    gap = np.abs(p - q)
-    small = gap < 1e-10
-    safe = np.where(small, 1.0, gap)
-    phi = np.where(small, 1.0 - 0.5 * gap, -np.expm1(-safe) / safe)
-    return tau * np.exp(-np.minimum(p, q)) * phi
-
-
-def _beam_particular_solutions(mu, weight, omega, cosines, p_r_beam, p_t_beam, p_reflection, p_transmission):
-    """Particular solutions ``Z e^{-tau/u}`` of the quadrature equations for collimated beams.
-
-    A beam of unit ``c I`` (the kernels' normalisation) travelling down along ``u`` scatters
-    into the quadrature with the source ``(omega/2) p(mu_i, u) e^{-tau/u} / u``; the diffuse
-    field it drives, ``I+- = Z+- e^{-tau/u}``, solves (``M = diag mu``, ``W = diag w``)
-
-        [(omega/2) pT W - 1 + M/u] Z+ + (omega/2) pR W Z-            = -(omega/2) pT(., u) / u
-        (omega/2) pR W Z+            + [(omega/2) pT W - 1 - M/u] Z- = -(omega/2) pR(., u) / u
-
-    (Stamnes et al. 1988, eq. 15, in this module's notation). It is singular only where ``1/u``
-    equals an eigenvalue ``k``, which a direction off the quadrature meets only by accident.
-
-    Parameters
-    ----------
-    mu, weight : numpy.ndarray
-        Quadrature nodes and positive weights, shape (N,) [-].
-    omega : numpy.ndarray
-        Single-scattering albedos, shape (G,) [-].
-    cosines : numpy.ndarray
-        Beam direction cosines in the binder, shape (L,) [-].
-    p_r_beam, p_t_beam : numpy.ndarray
-        Phase-function mode from each beam into the quadrature nodes, opposite and same
-        hemisphere, shape (N, L) [-].
-    p_reflection, p_transmission : numpy.ndarray
-        The mode between quadrature nodes, shape (N, N) [-].
-
-    Returns
-    -------
-    z_down, z_up : numpy.ndarray
-        ``Z+`` and ``Z-``, shape (G, L, N) [-].
-    """
-    n = mu.size
-    half = 0.5 * omega[:, None, None, None]
-    shift = np.eye(n) * (mu / cosines[:, None])[:, None, :]  # (L, N, N): M / u
-    same = half * (p_transmission * weight) - np.eye(n)
-    cross = np.broadcast_to(half * (p_reflection * weight), same.shape[:1] + (cosines.size, n, n))
-    system = np.block([[same + shift, cross], [cross, same - shift]])  # (G, L, 2N, 2N)
-    source = np.concatenate([p_t_beam, p_r_beam], axis=0).T / cosines[:, None]  # (L, 2N)
-    solution = np.linalg.solve(system, -0.5 * omega[:, None, None, None] * source[None, :, :, None])[..., 0]
-    return solution[..., :n], solution[..., n:]
-
-
-def layer_mode_eigen(mu, weight, a, tau, p_reflection, p_transmission, start_thickness=START_THICKNESS):
-    """Kernels of a homogeneous layer for one azimuthal mode, from the eigen solution.
-
-    Same parameters and returns as :func:`bayespig.physics.adding_doubling.layer_mode` (which it
-    calls for ``a <`` :data:`SMALL_ABSORPTION`); one eigen decomposition per distinct ``a``.
-    Zero-weight nodes (exact measurement directions) are solved as DISORT does (Stamnes et al.
-    1988): as incident directions by the particular solution of a collimated beam
-    (:func:`_beam_particular_solutions`) with the same boundary conditions, as outgoing
-    directions by integrating the source function along them (:func:`_layer_integral`; the
-    Nyström extension of the quadrature solution, which is what doubling computes on such
-    nodes). Quadrature rows of the zero-weight columns give, by reciprocity of the symmetric
-    kernels, the zero-weight rows of the quadrature columns.
-
-    Parameters
-    ----------
-    mu, weight : numpy.ndarray
-        Quadrature nodes and weights, shape (N,) [-]; zero weights mark exact directions.
-    a : numpy.ndarray
-        Relative absorption, shape (B,) [-].
-    tau : numpy.ndarray
-        Optical thickness, shape (B,) [-]; all finite or all ``inf``.
-    p_reflection, p_transmission : numpy.ndarray
-        This mode of the phase function, shape (N, N) [-]; symmetric.
-    start_thickness : float
-        Passed to the doubling solver for weakly absorbing layers.
-
-    Returns
-    -------
-    R, T : numpy.ndarray
-        Kernels, shape (B, N, N) [-].
-    direct : numpy.ndarray
-        ``exp(-tau/mu)``, shape (B, N) [-].
-
-    References
-    ----------
-    Stamnes, Tsay, Wiscombe & Jayaweera (1988), Appl. Opt. 27, 2502 (DISORT: beam particular
-    solution, intensities at arbitrary angles).
-    """
-    weight = np.asarray(weight, dtype=float)
-    if (weight < 0).any():
-        raise ValueError("quadrature weights must be >= 0 (zero marks an exact direction)")
-    a = np.atleast_1d(np.asarray(a, dtype=float))
-    tau = np.atleast_1d(np.asarray(tau, dtype=float))
-    opaque = np.isinf(tau)
-    if opaque.any() and not opaque.all():
-        raise ValueError("tau must be all finite or all infinite in one batch")
-    opaque = bool(opaque.all())
-    n_all = mu.size
-    R = np.empty((a.size, n_all, n_all))
-    T = np.zeros((a.size, n_all, n_all))
-    direct = np.zeros((a.size, n_all)) if opaque else np.exp(-tau[:, None] / mu[None, :])
-    small = a < SMALL_ABSORPTION
-    if small.any():
-        R[small], T[small], _ = layer_mode(mu, weight, a[small], tau[small], p_reflection, p_transmission,
-                                           start_thickness)
-    rows = np.flatnonzero(~small)
-    if rows.size == 0:
-        return R, T, direct
-    exact = weight == 0
-    n = int((~exact).sum())
-    if exact[:n].any():
-        raise ValueError("zero-weight nodes must follow the quadrature nodes (as binder_quadrature puts them)")
-    everything = rows.size == a.size
-    R_eig = R if everything else np.empty((rows.size, n_all, n_all))
-    T_eig = T if everything else np.zeros((rows.size, n_all, n_all))
-    mu_q, w_q = mu[:n], weight[:n]
-    distinct, which = np.unique(a[rows], return_inverse=True)
-    U, W, k = _eigen_solutions(mu_q, w_q, distinct, p_reflection[:n, :n], p_transmission[:n, :n])
-    # kernels act on c * L: divide the operators' columns by c
-    inv_c = 1.0 / (mu_q * w_q)
-    U_inv = np.linalg.inv(U)
-    if opaque:
-        E = np.zeros((rows.size, n))
-        D_inv = U_inv[which]
-        R_eig[:, :n, :n] = (W @ U_inv)[which] * inv_c
-    else:
-        E = np.exp(-tau[rows, None] * k[which])  # (B, N)
-        P = U_inv @ W
-        Ub, Wb = U[which], W[which]
-        EPE = E[:, :, None] * P[which] * E[:, None, :]
-        D_inv = np.linalg.inv(Ub - Wb @ EPE)
-        R_eig[:, :n, :n] = (Wb - Ub @ EPE) @ D_inv * inv_c
-        T_q = ((Ub - (W @ P)[which]) * E[:, None, :]) @ D_inv * inv_c
-        T_q[:, np.arange(n), np.arange(n)] -= direct[rows, :n] * inv_c
-        T_eig[:, :n, :n] = T_q
-    if n < n_all:
-        R_z, T_z = _exact_direction_kernels(mu, weight, n, distinct, which, tau[rows], U, W, k, U_inv, E,
-                                            D_inv, p_reflection, p_transmission, opaque)
-        # columns (incident along an exact direction) and, by reciprocity, rows over the quadrature
-        R_eig[:, :, n:] = R_z
-        R_eig[:, n:, :n] = np.swapaxes(R_z[:, :n], 1, 2)
-        T_eig[:, :, n:] = T_z
-        T_eig[:, n:, :n] = np.swapaxes(T_z[:, :n], 1, 2)
-    if not everything:
-        R[rows], T[rows] = R_eig, T_eig
-    return R, T, direct
-
-
-def _exact_direction_kernels(mu, weight, n, distinct, which, tau, U, W, k, U_inv, E, D_inv,
-                             p_reflection, p_transmission, opaque):
-    """Kernel columns of beams along the zero-weight nodes ``n:``, on all nodes (quadrature first).
-
-    Returns ``R_z``, ``T_z`` of shape (B, N_q + N_z, N_z) [-]: the quadrature rows from the
-    boundary conditions of the beam's diffuse field, the exact-direction rows from the formal
-    integration of the source function along each direction (DISORT's intensities at user
-    angles).
-    """
-    mu_q, w_q, u = mu[:n], weight[:n], mu[n:]
-    omega = 1.0 - distinct
-    z_down, z_up = _beam_particular_solutions(mu_q, w_q, omega, u, p_reflection[:n, n:], p_transmission[:n, n:],
-                                              p_reflection[:n, :n], p_transmission[:n, :n])
-    z_down = np.swapaxes(z_down, 1, 2)[which]  # (B, N, L)
-    z_up = np.swapaxes(z_up, 1, 2)[which]
-    Ub, Wb, U_inv_b = U[which], W[which], U_inv[which]
-    beam = np.zeros((tau.size, u.size)) if opaque else np.exp(-tau[:, None] / u)  # (B, L)
-    # boundary conditions I+(0) = 0, I-(tau) = 0 for Z + U a + W E b (down), Z + W E a + U b (up):
-    # a = D^-1 (f - W E U^-1 g), b = U^-1 (g - W E a) with f = -Z+, g = -Z- e^{-tau/u}
-    f = -z_down
-    g = -z_up * beam[:, None, :]
-    WE = Wb * E[:, None, :]
-    alpha = D_inv @ (f - WE @ (U_inv_b @ g))
-    beta = U_inv_b @ (g - WE @ alpha)
-    UE = Ub * E[:, None, :]
-    R_q = z_up + Wb @ alpha + UE @ beta
-    T_q = z_down * beam[:, None, :] + UE @ alpha + Wb @ beta
-    # source function along the exact directions: (omega/2) sum_j w_j p(mu, mu_j) I(mu_j)
-    half = 0.5 * omega[:, None, None]
-    p_r_zq = p_reflection[n:, :n] * w_q
-    p_t_zq = p_transmission[n:, :n] * w_q
-    up_decaying = (half * (p_r_zq @ U + p_t_zq @ W))[which]  # (B, L, N); growing: (W, U) swaps
-    down_decaying = (half * (p_t_zq @ U + p_r_zq @ W))[which]
-    half_b = half[which]
-    up_particular = half_b * (p_r_zq @ z_down + p_t_zq @ z_up + p_reflection[n:, n:] / u)
-    down_particular = half_b * (p_t_zq @ z_down + p_r_zq @ z_up + p_transmission[n:, n:] / u)
-    inv_mu = (1.0 / u)[None, :, None]  # rows: viewing direction
-    rate_beam = (1.0 / u)[None, None, :]  # columns: beam direction
-    kk = k[which][:, None, :]  # (B, 1, N)
-    if opaque:
-        R_zz = (up_particular / (rate_beam + inv_mu) + (up_decaying / (kk + inv_mu)) @ alpha) * inv_mu
-        T_zz = np.zeros_like(R_zz)
-    else:
-        t = tau[:, None, None]
-        zero = np.zeros(1)
-        R_zz = inv_mu * (up_particular * _layer_integral(rate_beam + inv_mu, zero, t)
-                         + (up_decaying * _layer_integral(kk + inv_mu, zero, t)) @ alpha
-                         + (down_decaying * _layer_integral(inv_mu, kk, t)) @ beta)
-        T_zz = inv_mu * (down_particular * _layer_integral(rate_beam, inv_mu, t)
-                         + (down_decaying * _layer_integral(kk, inv_mu, t)) @ alpha
-                         + (up_decaying * _layer_integral(zero, kk + inv_mu, t)) @ beta)
-    return np.concatenate([R_q, R_zz], axis=1), np.concatenate([T_q, T_zz], axis=1)
-
-
 def _growing_integral(e_view, e_mode, rate_difference, tau):
     """``int_0^tau e^{-t/mu} e^{-k (tau - t)} dt = (e^{-tau/mu} - e^{-k tau}) / (k - 1/mu)`` [-].
 
@@ -309,38 +110,151 @@ def _growing_integral(e_view, e_mode, rate_difference, tau):
     return np.where(near, series, (e_view - e_mode) / safe)
 
 
-def _up_at_exact_directions(up_decaying, down_decaying, alpha, beta, k, tau, inv_mu, opaque):
-    """Upward radiance leaving the top along exact directions from the homogeneous solutions.
+def layer_mode_eigen(mu, weight, a, tau, p_reflection, p_transmission, start_thickness=START_THICKNESS):
+    """Kernels of a homogeneous layer for one azimuthal mode, from the eigen solution.
 
-    Formal integration of the source function ``sum_k (alpha_k h-_k e^{-k t} + beta_k h+_k
-    e^{-k (tau - t)})`` along ``mu``: ``(1/mu) int_0^tau (...) e^{-t/mu} dt``.
+    Same parameters and returns as :func:`bayespig.physics.adding_doubling.layer_mode` (which it
+    calls for ``a <`` :data:`SMALL_ABSORPTION`); one eigen decomposition per distinct ``a``.
 
     Parameters
     ----------
-    up_decaying, down_decaying : numpy.ndarray
-        Upward / downward source of each decaying solution along each direction, (B, L, N) [-]
-        (a growing solution's upward source is the decaying one's downward source).
-    alpha, beta : numpy.ndarray
-        Coefficients of the decaying and growing solutions, (B, N, C) for C problems.
-    k : numpy.ndarray
-        Eigenvalues, (B, 1, N) [-].
+    mu, weight : numpy.ndarray
+        Quadrature nodes and weights, shape (N,) [-]; weights must be positive.
+    a : numpy.ndarray
+        Relative absorption, shape (B,) [-].
     tau : numpy.ndarray
-        Optical thickness, (B, 1, 1) [-] (ignored if ``opaque``).
-    inv_mu : numpy.ndarray
-        ``1/mu`` of the exact directions, (1, L, 1).
-    opaque : bool
-        Semi-infinite layer (``beta`` is not used).
+        Optical thickness, shape (B,) [-]; all finite or all ``inf``.
+    p_reflection, p_transmission : numpy.ndarray
+        This mode of the phase function, shape (N, N) [-].
+    start_thickness : float
+        Passed to the doubling solver for weakly absorbing layers.
 
     Returns
     -------
-    numpy.ndarray
-        (B, L, C) [-].
+    R, T : numpy.ndarray
+        Kernels, shape (B, N, N) [-].
+    direct : numpy.ndarray
+        ``exp(-tau/mu)``, shape (B, N) [-].
     """
-    if opaque:
-        return inv_mu * (up_decaying / (k + inv_mu)) @ alpha
-    zero = np.zeros(1)
-    return inv_mu * ((up_decaying * _layer_integral(k + inv_mu, zero, tau)) @ alpha
-                     + (down_decaying * _layer_integral(inv_mu, k, tau)) @ beta)
+    if not (np.asarray(weight) > 0).all():
+        raise ValueError("layer_mode_eigen needs positive quadrature weights (no zero-weight "
+                         "measurement nodes; use adding_doubling.layer_mode for those)")
+    a = np.atleast_1d(np.asarray(a, dtype=float))
+    tau = np.atleast_1d(np.asarray(tau, dtype=float))
+    opaque = np.isinf(tau)
+    if opaque.any() and not opaque.all():
+        raise ValueError("tau must be all finite or all infinite in one batch")
+    n = mu.size
+    c = mu * weight
+    R = np.empty((a.size, n, n))
+    T = np.zeros((a.size, n, n))
+    direct = np.zeros((a.size, n)) if opaque.all() else np.exp(-tau[:, None] / mu[None, :])
+    small = a < SMALL_ABSORPTION
+    if small.any():
+        R[small], T[small], _ = layer_mode(mu, weight, a[small], tau[small], p_reflection, p_transmission,
+                                           start_thickness)
+    rows = np.flatnonzero(~small)
+    if rows.size == 0:
+        return R, T, direct
+    distinct, which = np.unique(a[rows], return_inverse=True)
+    U, W, k = _eigen_solutions(mu, weight, distinct, p_reflection, p_transmission)
+    U, W, k = U[which], W[which], k[which]
+    # kernels act on c * L: divide the operators' columns by c
+    inv_c = 1.0 / c
+    if opaque.all():
+        R[rows] = np.swapaxes(np.linalg.solve(np.swapaxes(U, 1, 2), np.swapaxes(W, 1, 2)), 1, 2) * inv_c
+        return R, T, direct
+    E = np.exp(-tau[rows, None] * k)  # (G, N)
+    P = np.linalg.solve(U, W)
+    EPE = E[:, :, None] * P * E[:, None, :]
+    D = U - W @ EPE
+    numerators = np.concatenate([W - U @ EPE, (U - W @ P) * E[:, None, :]], axis=1)  # (G, 2N, N)
+    # X D = numerator  <=>  D^T X^T = numerator^T
+    solved = np.swapaxes(np.linalg.solve(np.swapaxes(D, 1, 2), np.swapaxes(numerators, 1, 2)), 1, 2)
+    R[rows] = solved[:, :n] * inv_c
+    T[rows] = (solved[:, n:] - direct[rows][:, :, None] * np.eye(n)) * inv_c
+    return R, T, direct
+
+
+def _beam_particular_solutions(mu, weight, omega, cosines, rates, p_r_beam, p_t_beam, p_reflection,
+                               p_transmission):
+    """Particular solutions ``Z e^{-r tau}`` of the quadrature equations for collimated beams.
+
+    A beam of unit ``c I`` (the kernels' normalisation) travelling down along ``u`` scatters
+    into the quadrature with the source ``(omega/2) p(mu_i, u) e^{-r tau} / u`` (``r = 1/u``; other
+    rates serve the extrapolation across a resonance); the diffuse field it drives,
+    ``I+- = Z+- e^{-r tau}``, solves (``M = diag mu``, ``W = diag w``)
+
+        [(omega/2) pT W - 1 + r M] Z+ + (omega/2) pR W Z-            = -(omega/2) pT(., u) / u
+        (omega/2) pR W Z+            + [(omega/2) pT W - 1 - r M] Z- = -(omega/2) pR(., u) / u
+
+    (Stamnes et al. 1988, eq. 15, in this module's notation), singular where ``r`` equals an
+    eigenvalue ``k``.
+
+    Parameters
+    ----------
+    mu, weight : numpy.ndarray
+        Quadrature nodes and positive weights, shape (N,) [-].
+    omega : numpy.ndarray
+        Single-scattering albedos, shape (G,) [-].
+    cosines : numpy.ndarray
+        Beam direction cosines in the binder, shape (L,) [-].
+    rates : numpy.ndarray
+        Attenuation rate of each beam for each albedo, shape (G, L) [-].
+    p_r_beam, p_t_beam : numpy.ndarray
+        Phase-function mode from each beam into the quadrature nodes, opposite and same
+        hemisphere, shape (N, L) [-].
+    p_reflection, p_transmission : numpy.ndarray
+        The mode between quadrature nodes, shape (N, N) [-].
+
+    Returns
+    -------
+    z_down, z_up : numpy.ndarray
+        ``Z+`` and ``Z-``, shape (G, N, L) [-].
+    """
+    n = mu.size
+    half = 0.5 * omega[:, None, None, None]
+    shift = np.eye(n) * (rates[:, :, None, None] * mu)  # (G, L, N, N): r M
+    same = half * (p_transmission * weight) - np.eye(n)
+    cross = np.broadcast_to(half * (p_reflection * weight), shift.shape)
+    system = np.block([[same + shift, cross], [cross, same - shift]])  # (G, L, 2N, 2N)
+    source = np.concatenate([p_t_beam, p_r_beam], axis=0).T / cosines[:, None]  # (L, 2N)
+    solution = np.linalg.solve(system, -0.5 * omega[:, None, None, None] * source[None, :, :, None])[..., 0]
+    return np.swapaxes(solution[..., :n], 1, 2), np.swapaxes(solution[..., n:], 1, 2)
+
+
+def _beam_columns(k, cosines):
+    """Attenuation rates of the beam columns and the weights that make them the beams.
+
+    Away from resonance a beam is one column at its own rate ``1/u``; a beam within
+    :data:`RESONANCE_GAP` of an eigenvalue, for any albedo of the batch, gets four columns at
+    the rates ``RESONANCE_FACTORS / u`` for the albedos near resonance (its own rate, weight 1,
+    for the others), combined with :data:`RESONANCE_WEIGHTS`.
+
+    Returns
+    -------
+    beam_of_column : numpy.ndarray
+        Beam index of each column, (C,).
+    rates : numpy.ndarray
+        Rate of each column for each albedo, (G, C) [-].
+    weights : numpy.ndarray
+        Weight of each column in its beam for each albedo, (G, C) [-].
+    """
+    rate = 1.0 / cosines
+    gap = np.min(np.abs(k[:, :, None] / rate - 1.0), axis=1)  # (G, L)
+    near = gap < RESONANCE_GAP
+    beam_of_column, rates, weights = [], [], []
+    for b in range(cosines.size):
+        if not near[:, b].any():
+            beam_of_column.append(b)
+            rates.append(np.full(k.shape[0], rate[b]))
+            weights.append(np.ones(k.shape[0]))
+            continue
+        for factor, weight in zip(RESONANCE_FACTORS, RESONANCE_WEIGHTS):
+            beam_of_column.append(b)
+            rates.append(np.where(near[:, b], factor * rate[b], rate[b]))
+            weights.append(np.where(near[:, b], weight, float(factor == RESONANCE_FACTORS[0])))
+    return np.array(beam_of_column), np.stack(rates, axis=1), np.stack(weights, axis=1)
 
 
 def radiances_under_surface(mu, weight, a, tau, p_reflection, p_transmission, r_top, beams, views,
@@ -356,7 +270,9 @@ def radiances_under_surface(mu, weight, a, tau, p_reflection, p_transmission, r_
     ``beta = U^-1 (g - W E alpha)`` and the top condition
     ``[(U - r W) - (W - r U) E P E] alpha = f - (W - r U) E U^-1 g`` with
     ``P = U^-1 W`` (beam: ``f = -(Z+ - r Z-)``, ``g = -Z- e^{-tau/u}``; substrate: ``f = 0``,
-    ``g = 1``). This replaces forming the layer kernels and adding the surface to them.
+    ``g = 1``). This replaces forming the layer kernels and adding the surface to them. A beam
+    near the resonance of its particular solution is extrapolated across it
+    (:func:`_beam_columns`).
 
     Parameters
     ----------
@@ -372,7 +288,8 @@ def radiances_under_surface(mu, weight, a, tau, p_reflection, p_transmission, r_
     beams, views : numpy.ndarray
         Indices (into ``mu``) of the exact incidence and viewing directions.
     substrate : bool
-        Also solve the problem of the Lambertian bottom (mode 0).
+        Also solve the problem of the Lambertian bottom (mode 0), and return the radiances at
+        the weighted nodes.
 
     Returns
     -------
@@ -401,70 +318,90 @@ def radiances_under_surface(mu, weight, a, tau, p_reflection, p_transmission, r_
     P = U_inv @ W
     r = r_top[:, None]
     U_r, W_r = U - r * W, W - r * U  # top condition: I+(0) - r I-(0)
-    u = mu[beams]
-    z_down, z_up = _beam_particular_solutions(mu_q, w_q, omega, u, p_reflection[:n, beams],
-                                              p_transmission[:n, beams], p_reflection[:n, :n],
-                                              p_transmission[:n, :n])
-    z_down, z_up = np.swapaxes(z_down, 1, 2), np.swapaxes(z_up, 1, 2)  # (G, N, L)
+    beam_of_column, rates, weights = _beam_columns(k, mu[beams])
+    columns = np.asarray(beams)[beam_of_column]
+    u = mu[columns]
+    z_down, z_up = _beam_particular_solutions(mu_q, w_q, omega, u, rates, p_reflection[:n, columns],
+                                              p_transmission[:n, columns], p_reflection[:n, :n],
+                                              p_transmission[:n, :n])  # (G, N, C)
     f = -(z_down - r * z_up)
     g = -z_up
     if substrate:
         f = np.concatenate([f, np.zeros((distinct.size, n, 1))], axis=-1)
         g = np.concatenate([g, np.ones((distinct.size, n, 1))], axis=-1)
-    n_beams = u.size
     # source function along the viewing directions, per distinct a
     half = 0.5 * omega[:, None, None]
     p_r_vq = p_reflection[views, :n] * w_q
     p_t_vq = p_transmission[views, :n] * w_q
-    up_decaying = half * (p_r_vq @ U + p_t_vq @ W)  # (G, L_views, N)
-    down_decaying = half * (p_t_vq @ U + p_r_vq @ W)
-    up_particular = half * (p_r_vq @ z_down + p_t_vq @ z_up + p_reflection[np.ix_(views, beams)] / u)
-    inv_mu = (1.0 / mu[views])[None, :, None]
-    rate_beam = (1.0 / u)[None, None, :]
+    per_a = {
+        "k": k, "U": U, "W": W, "U_inv": U_inv, "P": P, "U_r": U_r, "W_r": W_r, "f": f, "g": g,
+        "z_down": z_down, "z_up": z_up, "rates": rates,
+        "up_decaying": half * (p_r_vq @ U + p_t_vq @ W),  # (G, L_views, N); growing: (W, U) swap
+        "down_decaying": half * (p_t_vq @ U + p_r_vq @ W),
+        "up_particular": half * (p_r_vq @ z_down + p_t_vq @ z_up + p_reflection[np.ix_(views, columns)] / u),
+    }
+    inv_mu = 1.0 / mu[views]
     if opaque:
-        alpha = np.linalg.solve(U_r, f)  # one solve per distinct a serves every row
-        up = (W @ alpha + np.concatenate([z_up, np.zeros_like(g[..., n_beams:])], axis=-1))[which]
-        up_view = _up_at_exact_directions(up_decaying, None, alpha, None, k[:, None, :], None, inv_mu, True)
-        up_view[..., :n_beams] += inv_mu * up_particular / (rate_beam + inv_mu)
-        down = np.zeros_like(up)
-        if substrate:  # nothing reaches the bottom; what it would send up comes back as R c 1
-            down[..., -1] = (W @ U_inv.sum(axis=-1)[..., None])[which, :, 0]
-        return {"up": up, "up_view": up_view[which], "down": down}
-    n_views, n_columns = inv_mu.size, g.shape[-1]
-    out = {"up_view": np.empty((tau.size, n_views, n_columns))}
-    if substrate:
-        out["up"] = np.empty((tau.size, n, n_columns))
-        out["down"] = np.empty((tau.size, n, n_columns))
-    # per row, in blocks small enough for the core's cache (a block's (B, N, N) arrays, ~0.25 MB
-    # each at N = 32, run 2-3 times faster than the same work on 256 rows at once)
-    for start in range(0, tau.size, ROW_BLOCK):
-        rows = slice(start, start + ROW_BLOCK)
-        block = _rows_under_surface(which[rows], tau[rows], k, U, W, U_inv, P, U_r, W_r, f, g, z_down, z_up, u,
-                                    up_decaying, down_decaying, up_particular, 1.0 / mu[views], substrate)
-        for key, value in block.items():
-            out[key][rows] = value
-    return {"up": out.get("up"), "up_view": out["up_view"], "down": out.get("down")}
+        out = _opaque_under_surface(per_a, inv_mu, substrate)
+        out = {key: None if value is None else value[which] for key, value in out.items()}
+    else:
+        out = {"up_view": np.empty((tau.size, inv_mu.size, g.shape[-1]))}
+        if substrate:
+            out["up"] = np.empty((tau.size, n, g.shape[-1]))
+            out["down"] = np.empty((tau.size, n, g.shape[-1]))
+        # in blocks small enough for the core's cache (a block's (B, N, N) arrays, ~0.25 MB each
+        # at N = 32, run 2-3 times faster than the same work on 256 rows at once)
+        for start in range(0, tau.size, ROW_BLOCK):
+            rows = slice(start, start + ROW_BLOCK)
+            for key, value in _rows_under_surface(which[rows], tau[rows], per_a, inv_mu, substrate).items():
+                out[key][rows] = value
+    # the beam columns combined into the beams (with the substrate column passed through)
+    n_beams = len(beams)
+    combine = np.zeros((distinct.size, g.shape[-1], n_beams + g.shape[-1] - columns.size))
+    combine[:, np.arange(columns.size), beam_of_column] = weights
+    combine[:, columns.size:, n_beams:] = np.eye(g.shape[-1] - columns.size)
+    combine = combine[which]
+    return {key: None if out.get(key) is None else out[key] @ combine for key in ("up", "up_view", "down")}
 
 
-def _rows_under_surface(which, tau, k, U, W, U_inv, P, U_r, W_r, f, g, z_down, z_up, u, up_decaying, down_decaying,
-                        up_particular, inv_mu_view, substrate):
+def _opaque_under_surface(per_a, inv_mu, substrate):
+    """:func:`radiances_under_surface` for semi-infinite layers, per distinct ``a``: one solve each."""
+    k, W, U_inv, f, z_up = (per_a[name] for name in ("k", "W", "U_inv", "f", "z_up"))
+    alpha = np.linalg.solve(per_a["U_r"], f)
+    n_beams = z_up.shape[-1]
+    inv_mu = inv_mu[None, :, None]
+    up_view = inv_mu * (per_a["up_decaying"] / (k[:, None, :] + inv_mu)) @ alpha
+    up_view[..., :n_beams] += inv_mu * per_a["up_particular"] / (per_a["rates"][:, None, :] + inv_mu)
+    if not substrate:
+        return {"up_view": up_view}
+    up = W @ alpha
+    up[..., :n_beams] += z_up
+    down = np.zeros_like(up)
+    # nothing reaches the bottom; what it would send up comes back as R c 1
+    down[..., -1] = (W @ U_inv.sum(axis=-1)[..., None])[..., 0]
+    return {"up_view": up_view, "up": up, "down": down}
+
+
+def _rows_under_surface(which, tau, per_a, inv_mu_view, substrate):
     """The per-layer part of :func:`radiances_under_surface` for finite layers ``tau`` (B,), whose
-    distinct-``a`` quantities are picked by ``which``: the N x N solve for ``alpha``, then
-    ``beta`` and the radiances."""
-    n_beams = u.size
+    distinct-``a`` quantities ``per_a`` are picked by ``which``: the N x N solve for ``alpha``,
+    then ``beta`` and the radiances."""
+    k, U, W, P, f, g = (per_a[name] for name in ("k", "U", "W", "P", "f", "g"))
+    rates = per_a["rates"][which]  # (B, C_beams)
+    n_beams = rates.shape[1]
     E = np.exp(-tau[:, None] * k[which])  # (B, N)
     # below ~1e-100 a factor is zero to any accuracy: flushing it keeps E P E and the products
     # that follow out of the subnormal range, where arithmetic is ~100 times slower
     E[E < NEGLIGIBLE_ATTENUATION] = 0.0
-    beam = np.exp(-tau[:, None] / u)  # (B, L): the beams' attenuation scales g (and Z+ at the bottom)
+    beam = np.exp(-tau[:, None] * rates)  # (B, C): the beams' attenuation scales g (and Z+ at the bottom)
     scale = np.concatenate([beam, np.ones((tau.size, g.shape[-1] - n_beams))], axis=-1)[:, None, :]
-    U_inv_g = U_inv[which] @ (g[which] * scale)
+    U_inv_g = per_a["U_inv"][which] @ (g[which] * scale)
     P_b = P[which]
     EPE = P_b * E[:, :, None]
     EPE *= E[:, None, :]
-    W_r_b = W_r[which]
+    W_r_b = per_a["W_r"][which]
     system = W_r_b @ EPE
-    np.subtract(U_r[which], system, out=system)
+    np.subtract(per_a["U_r"][which], system, out=system)
     rhs = f[which]
     rhs -= W_r_b @ (E[:, :, None] * U_inv_g)
     alpha = np.linalg.solve(system, rhs)
@@ -475,14 +412,16 @@ def _rows_under_surface(which, tau, k, U, W, U_inv, P, U_r, W_r, f, g, z_down, z
     inv_mu = inv_mu_view[None, :, None]
     decaying = (1.0 - E[:, None, :] * e_view[:, :, None]) / (k_b + inv_mu)
     growing = _growing_integral(e_view[:, :, None], E[:, None, :], k_b - inv_mu, tau[:, None, None])
-    up_view = inv_mu * ((up_decaying[which] * decaying) @ alpha + (down_decaying[which] * growing) @ beta)
-    up_view[..., :n_beams] += (inv_mu * up_particular[which] * (1.0 - e_view[:, :, None] * beam[:, None, :])
-                               / (inv_mu + 1.0 / u))
+    up_view = inv_mu * ((per_a["up_decaying"][which] * decaying) @ alpha
+                        + (per_a["down_decaying"][which] * growing) @ beta)
+    up_view[..., :n_beams] += (inv_mu * per_a["up_particular"][which]
+                               * (1.0 - e_view[:, :, None] * beam[:, None, :]) / (inv_mu + rates[:, None, :]))
     if not substrate:
         return {"up_view": up_view}
     up_view[..., n_beams:] += e_view[:, :, None]  # the bottom seen through the layer
     Ub, Wb = U[which], W[which]
     zeros = np.zeros((tau.size, E.shape[1], g.shape[-1] - n_beams))
-    up = np.concatenate([z_up[which], zeros], axis=-1) + Wb @ alpha + Ub @ (E[:, :, None] * beta)
-    down = np.concatenate([z_down[which] * beam[:, None, :], zeros], axis=-1) + Ub @ (E[:, :, None] * alpha) + Wb @ beta
+    up = np.concatenate([per_a["z_up"][which], zeros], axis=-1) + Wb @ alpha + Ub @ (E[:, :, None] * beta)
+    down = (np.concatenate([per_a["z_down"][which] * beam[:, None, :], zeros], axis=-1)
+            + Ub @ (E[:, :, None] * alpha) + Wb @ beta)
     return {"up_view": up_view, "up": up, "down": down}

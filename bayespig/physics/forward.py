@@ -3,10 +3,14 @@
 The paint is a layer of binder (index ``n``) carrying pigment (relative absorption
 ``a``, optical thickness ``tau``, phase-function parameter ``g``), under a smooth
 air/binder surface and on a Lambertian substrate of albedo ``r_s`` seen from the
-binder (paper section 2, eq. 1). The layer is solved by adding–doubling
-(:mod:`bayespig.physics.adding_doubling`); the surface is added by the
-self-consistent equation (8) of appendix A1, and the substrate by the exact
-substrate law, eq. (3).
+binder (paper section 2, eq. 1). Each azimuthal mode of the layer under its surface
+is solved by the discrete-ordinate method with the surface's internal reflection as
+the top boundary (:func:`surface_mode_eigen`, :mod:`bayespig.physics.discrete_ordinates`),
+equivalent to adding the surface to the layer's kernels by the self-consistent
+equation (8) of appendix A1; the substrate enters by the exact substrate law,
+eq. (3). Adding–doubling (:mod:`bayespig.physics.adding_doubling`) with
+:func:`surface_mode` is the cross-check (``solver="doubling"``) and the path for
+nearly conservative layers.
 
 Angles are in degrees, in air: ``theta_i`` incidence, ``theta_o`` viewing and
 ``delta_phi`` the azimuth between the plane of incidence and the plane of viewing,

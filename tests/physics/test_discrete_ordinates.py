@@ -1,4 +1,4 @@
-"""The discrete-ordinate eigen layer (the forward model's layer solver) against the doubling solver.
+"""The discrete-ordinate solver (the forward model's) against the doubling solver.
 
 Reference: :func:`bayespig.physics.adding_doubling.layer_mode` on the same quadrature and
 phase-function modes (itself checked against the H-function, van de Hulst's tables and
@@ -9,9 +9,13 @@ agree to the doubling's own start error (~1e-8), far below the 1e-5 the forward 
 import numpy as np
 import pytest
 
+from scipy.integrate import quad
+from scipy.optimize import brentq
+
+from bayespig.physics import discrete_ordinates
 from bayespig.physics.adding_doubling import layer_mode
 from bayespig.physics.discrete_ordinates import SMALL_ABSORPTION, layer_mode_eigen
-from bayespig.physics.fresnel import refracted_cosine
+from bayespig.physics.forward import surface_geometry, surface_terms
 from bayespig.physics.phase import normalise_on_quadrature, phase_fourier_modes
 from bayespig.physics.quadrature import binder_quadrature
 
@@ -58,61 +62,112 @@ def test_eigen_layer_equals_doubling(g, mode, opaque):
         assert _close(T_e, T_d) < SAME_EQUATIONS_REL_TOL
 
 
-#: Measurement directions refracted into the binder (n = 1.45) from these air angles [deg], as
-#: zero-weight nodes: normal incidence, the sphere's 8 deg, the multi-angle set, and grazing.
-EXACT_AIR_ANGLES = (0.0, 8.0, 20.0, 45.0, 65.0, 89.0)
-
-
-@pytest.mark.parametrize("g, mode", [(0.0, 0), (0.5, 0), (0.5, 1), (0.5, 6), (-0.3, 2), (5.0, 2)])
-@pytest.mark.parametrize("opaque", [False, True])
-def test_exact_directions_equal_doubling(g, mode, opaque):
-    """Zero-weight rows and columns (beam particular solution, formal integration) against
-    doubling, which carries such nodes through its matrix recurrences unchanged."""
-    extra = refracted_cosine(np.cos(np.radians(EXACT_AIR_ANGLES)), 1.0, 1.45)
-    mu, weight = binder_quadrature(8, 1.45, extra_nodes=extra)
-    p_r, p_t = _modes(mu, weight, g, mode + 1)
-    rng = np.random.default_rng(11)
-    a = np.concatenate([[0.0, 0.5 * SMALL_ABSORPTION, 2 * SMALL_ABSORPTION, 1.0], rng.uniform(0.0, 1.0, 12)])
-    # thin to thick, and a layer as thick as the resonance tau k = tau / mu makes sharpest
-    tau = np.full(a.size, np.inf) if opaque else np.exp(rng.uniform(np.log(1e-3), np.log(100.0), a.size))
-    R_e, T_e, _ = layer_mode_eigen(mu, weight, a, tau, p_r[mode], p_t[mode])
-    R_d, T_d, _ = layer_mode(mu, weight, a, tau, p_r[mode], p_t[mode])
-    exact = slice(-extra.size, None)
-    for name, eigen, doubling in (("R", R_e, R_d), ("T", T_e, T_d)):
-        if opaque and name == "T":
-            assert not eigen.any()
-            continue
-        scale = np.abs(doubling).max()
-        for block in ((exact, exact), (exact, slice(None)), (slice(None), exact)):
-            difference = np.abs(eigen[(slice(None),) + block] - doubling[(slice(None),) + block]).max()
-            assert difference < SAME_EQUATIONS_REL_TOL * scale, (name, block, difference / scale)
-
-
-def test_exact_direction_kernels_are_reciprocal():
-    """``R`` and ``T`` of a homogeneous layer are symmetric (reciprocity) on every node; the
-    zero-weight columns come from the beam solution and the zero-weight rows (quadrature
-    columns) from the quadrature rows by that symmetry, but the zero-weight block from two
-    independent integrations: check it."""
-    extra = refracted_cosine(np.cos(np.radians(EXACT_AIR_ANGLES)), 1.0, 1.45)
-    mu, weight = binder_quadrature(8, 1.45, extra_nodes=extra)
-    p_r, p_t = _modes(mu, weight, 0.5, 2)
-    a = np.array([0.01, 0.3, 0.9])
-    R, T, _ = layer_mode_eigen(mu, weight, a, np.array([0.05, 1.0, 7.0]), p_r[1], p_t[1])
-    block = slice(-extra.size, None)
-    for K in (R, T):
-        np.testing.assert_allclose(K[:, block, block], np.swapaxes(K[:, block, block], 1, 2),
-                                   rtol=SAME_EQUATIONS_REL_TOL, atol=NEGLIGIBLE * np.abs(K).max())
-
-
-def test_eigen_layer_refuses_bad_weights_and_mixed_batches():
+def test_eigen_layer_refuses_zero_weight_nodes_and_mixed_batches():
     mu, weight = binder_quadrature(4, 1.45, extra_nodes=(0.7,))
     p_r, p_t = _modes(mu, weight, 0.0, 1)
-    with pytest.raises(ValueError, match="must follow the quadrature nodes"):
-        layer_mode_eigen(mu[::-1], weight[::-1], np.array([0.1]), np.array([1.0]), p_r[0][::-1, ::-1],
-                         p_t[0][::-1, ::-1])
-    with pytest.raises(ValueError, match=">= 0"):
-        layer_mode_eigen(mu, -weight, np.array([0.1]), np.array([1.0]), p_r[0], p_t[0])
+    with pytest.raises(ValueError, match="positive quadrature weights"):
+        layer_mode_eigen(mu, weight, np.array([0.1]), np.array([1.0]), p_r[0], p_t[0])
     mu, weight = binder_quadrature(4, 1.45)
     p_r, p_t = _modes(mu, weight, 0.0, 1)
     with pytest.raises(ValueError, match="all finite or all infinite"):
         layer_mode_eigen(mu, weight, np.array([0.1, 0.2]), np.array([1.0, np.inf]), p_r[0], p_t[0])
+
+
+# --- the forward model's path: radiances under the surface at the exact directions -----------
+#: Both solvers' forward terms: the doubling's start error (thicker for modes >= 1) and the
+#: eigen form's conditioning (measured <= 3e-7 of each term's largest value).
+SOLVERS_REL_TOL = 2e-6
+TERMS = ("f0_modes", "t_down", "t_up", "r_up", "h0", "t_up_hemispherical")
+#: Incidence and viewing angles in air [deg]: the sphere's 8, the multi-angle set, normal and
+#: grazing viewing.
+THETA_IN = [8.0, 45.0]
+THETA_OUT = [0.0, 8.0, 30.0, 45.0, 60.0, 89.0]
+
+
+def _largest_difference(eigen, doubling):
+    """Largest difference of each SurfaceTerms field, relative to that field's largest value."""
+    out = {}
+    for name in TERMS:
+        x, y = getattr(eigen, name), getattr(doubling, name)
+        scale = np.abs(y).max()
+        out[name] = 0.0 if scale == 0.0 else float(np.abs(x - y).max() / scale)
+    return out
+
+
+@pytest.mark.parametrize("g", [0.0, 0.5, -0.3, 5.0])
+@pytest.mark.parametrize("opaque", [False, True])
+def test_surface_terms_eigen_equals_doubling(g, opaque):
+    """Every term of eq. (3) and every BRDF mode from the boundary-value solution (beam particular
+    solution, formal integration, the surface as top boundary) against doubling the kernels and
+    adding the surface; a over [0, 1] (the smallest through doubling in both), tau from 0."""
+    rng = np.random.default_rng(17)
+    a = np.concatenate([[0.0, 0.5 * SMALL_ABSORPTION, 2 * SMALL_ABSORPTION, 1.0], rng.uniform(0.0, 1.0, 20)])
+    tau = np.full(a.size, np.inf) if opaque else np.concatenate(
+        [[0.0, 1.0, 3.0, 0.0], np.exp(rng.uniform(np.log(1e-3), np.log(100.0), 20))])
+    n_modes = 6 if g not in (0.0, 5.0) else None
+    eigen = surface_terms(THETA_IN, THETA_OUT, a=a, tau=tau, g=g, n_modes=n_modes)
+    doubling = surface_terms(THETA_IN, THETA_OUT, a=a, tau=tau, g=g, n_modes=n_modes, solver="doubling")
+    differences = _largest_difference(eigen, doubling)
+    assert max(differences.values()) < SOLVERS_REL_TOL, differences
+
+
+def _resonant_absorption(g, mode, theta_in):
+    """An ``a`` where an eigenvalue of ``mode`` equals ``1/u`` of the refracted incidence ``u``."""
+    geometry = surface_geometry([theta_in], [30.0], 1.45, 16)
+    q = geometry.n_weighted
+    p_r, p_t = _modes(geometry.mu, geometry.weight, g, mode + 1)
+    rate = 1.0 / geometry.mu[geometry.idx_in][0]
+
+    def eigenvalues(a):
+        return np.sort(discrete_ordinates._eigen_solutions(
+            geometry.mu[:q], geometry.weight[:q], np.array([a]), p_r[mode][:q, :q], p_t[mode][:q, :q])[2][0])
+
+    grid = np.geomspace(2 * SMALL_ABSORPTION, 1.0, 200)
+    gaps = np.array([eigenvalues(a) for a in grid]) - rate
+    for j in range(q):
+        crossing = np.flatnonzero(np.diff(np.sign(gaps[:, j])))
+        if crossing.size:
+            i = crossing[0]
+            return brentq(lambda a: eigenvalues(a)[j] - rate, grid[i], grid[i + 1], xtol=1e-15)
+    return None
+
+
+@pytest.mark.parametrize("opaque", [False, True])
+def test_beam_at_the_resonance_of_its_particular_solution(opaque):
+    """At ``k = 1/u`` the beam's particular solution is singular (DISORT's resonance); the
+    extrapolation across it keeps the radiances those of doubling, which has no such point."""
+    a0 = _resonant_absorption(0.5, 1, 45.0)
+    assert a0 is not None, "expected an eigenvalue of mode 1 to cross 1/u for some a"
+    a = a0 * np.array([1.0, 1.0 + 1e-12, 1.0 - 1e-9, 1.0 + 1e-6, 1.0 + 1e-2])
+    tau = np.full(a.size, np.inf if opaque else 0.7)
+    eigen = surface_terms([45.0], [30.0, 60.0], a=a, tau=tau, g=0.5, n_modes=2)
+    doubling = surface_terms([45.0], [30.0, 60.0], a=a, tau=tau, g=0.5, n_modes=2, solver="doubling")
+    mode_1 = np.abs(eigen.f0_modes[:, 1] - doubling.f0_modes[:, 1]) / np.abs(doubling.f0_modes[:, 1]).max()
+    assert mode_1.max() < SOLVERS_REL_TOL, mode_1.max()
+
+
+@pytest.mark.parametrize("tau", [1e-3, 0.7, 30.0])
+def test_growing_integral_across_the_resonance(tau):
+    """``int_0^tau e^{-t/mu} e^{-k (tau - t)} dt`` against quadrature, k through 1/mu."""
+    inv_mu = 1.7
+    k = inv_mu + np.array([-3.0, -1e-2, -1e-5, 0.0, 1e-8, 1e-4, 2e-3, 5.0]) / tau
+    got = discrete_ordinates._growing_integral(np.exp(-tau * inv_mu), np.exp(-tau * k), k - inv_mu, tau)
+    for value, rate in zip(got, k):
+        reference = quad(lambda t: np.exp(-t * inv_mu - rate * (tau - t)), 0.0, tau, epsabs=0, epsrel=1e-13)[0]
+        assert value == pytest.approx(reference, rel=1e-12)
+
+
+def test_results_do_not_depend_on_the_batch():
+    """A layer solved alone or among others (other a, tau, some through doubling, several row
+    blocks) gives the same terms."""
+    rng = np.random.default_rng(3)
+    a = np.concatenate([rng.uniform(0.0, 1.0, 70), [5e-6, 0.3]])
+    tau = np.concatenate([np.exp(rng.uniform(np.log(1e-3), np.log(100.0), 70)), [42.0, 0.0]])
+    together = surface_terms([45.0], [30.0, 60.0], a=a, tau=tau, g=0.5)
+    for i in (0, 40, 70, 71):
+        alone = surface_terms([45.0], [30.0, 60.0], a=a[i:i + 1], tau=tau[i:i + 1], g=0.5)
+        for name in TERMS:
+            x, y = getattr(alone, name)[0], getattr(together, name)[i]
+            if name == "f0_modes":  # the batch stores as many modes as its slowest member needs
+                x = np.concatenate([x, np.zeros((y.shape[0] - x.shape[0],) + x.shape[1:])])
+            np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-300)
