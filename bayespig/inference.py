@@ -66,11 +66,13 @@ of the measured values at one wavelength, films concatenated in problem order), 
     is more than one group; ``g`` when ``g="free"``; ``eps`` when inferred.
 ``posterior_predictive``
     ``y`` (chain, draw, wavelength, value): the noise-free model prediction of every measured
-    value; ``y_rep`` with the noise of eq. (7) added when ``settings.predictive_noise``.
+    value; ``y_rep`` with the noise of eq. (7) added when ``settings.predictive_noise``
+    (single precision, as the log-likelihood).
 ``observed_data``
     ``y`` (wavelength, value).
 ``log_likelihood``
-    ``y`` (chain, draw, wavelength, value): pointwise log-likelihood of eq. (7).
+    ``y`` (chain, draw, wavelength, value): pointwise log-likelihood of eq. (7), single
+    precision.
 ``constant_data``
     ``r_s`` (wavelength, value): substrate albedo seen from the binder per value (0 for
     transmittance and opaque films); ``eps`` (wavelength, value): known relative error (NaN
@@ -149,6 +151,8 @@ FALLBACK_MOVES = "de-snooker"
 GAUSSIAN_PROPOSAL_SCALE = 1.5
 #: Diagnostics thresholds (Vehtari et al. 2021).
 RHAT_MAX = 1.01
+#: Storage type of the per-draw predictions and pointwise log-likelihoods.
+STORED_DRAW_DTYPE = np.float32
 ESS_MIN = 400
 
 
@@ -905,9 +909,12 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     post_coords = dict(coords)
     if len(groups) > 1:
         post_coords["group"] = groups
-    predictive = {"y": (cdw + ("value",), stack("y"))}
+    # per-draw predictions and pointwise log-likelihoods are most of the file (two values per
+    # measured value and draw): single precision (7 digits) is far finer than the noise they
+    # describe and halves it
+    predictive = {"y": (cdw + ("value",), stack("y").astype(STORED_DRAW_DTYPE))}
     if settings.predictive_noise:
-        predictive["y_rep"] = (cdw + ("value",), stack("y_rep"))
+        predictive["y_rep"] = (cdw + ("value",), stack("y_rep").astype(STORED_DRAW_DTYPE))
     parameters = list(log_post0.parameter_names)
     sample_stats = {
         "lp": (cdw, stack("lp")),
@@ -948,7 +955,7 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     datasets = {
         "posterior": xr.Dataset(posterior, coords=post_coords),
         "posterior_predictive": xr.Dataset(predictive, coords={**coords, **value_coords}),
-        "log_likelihood": xr.Dataset({"y": (cdw + ("value",), stack("log_likelihood"))},
+        "log_likelihood": xr.Dataset({"y": (cdw + ("value",), stack("log_likelihood").astype(STORED_DRAW_DTYPE))},
                                      coords={**coords, **value_coords}),
         "observed_data": xr.Dataset({"y": (("wavelength", "value"), observed)},
                                     coords={"wavelength": wavelength, **value_coords}),

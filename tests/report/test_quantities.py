@@ -13,8 +13,10 @@ from bayespig.report import quantities as q
 
 XYZ_TOL = 1e-6  # the fast colour path vs colour.sd_to_XYZ, XYZ on the 0-1 scale (issue 7)
 LAB_TOL = 1e-3  # L* = 116 f(Y) - 16 amplifies an XYZ error of 1e-6 by at most ~500 for dark colours
-LOGLIK_TOL = 1e-8  # the same eq. (7) terms through the same table: float64 round-off only
-TABLE_RTOL = 1e-9  # LookupTable direct vs the likelihood's fast stencil path (same interpolant)
+# the same eq. (7) terms through the same table; the stored ones in single precision (6e-8 of
+# values up to ~15 in magnitude)
+LOGLIK_TOL = 2e-6
+STORED_RTOL = 2e-7  # against the stored single-precision predictions (rounding 6e-8)
 
 
 def test_parameter_bands_are_exact_quantiles():
@@ -112,7 +114,7 @@ def test_predicted_films_match_the_posterior_predictive_of_the_measured_film(dem
     _, values = q.predicted_film_values(demo_idata, films, max_draws=64)
     predictive = q.residuals_in_eps(demo_idata, max_draws=64)["predicted_draws"]
     on_black = [k for k, r in enumerate(q.value_table(demo_idata)) if r["sample"] == "on_black"]
-    np.testing.assert_allclose(values[0], predictive[..., on_black], rtol=TABLE_RTOL)
+    np.testing.assert_allclose(values[0], predictive[..., on_black], rtol=STORED_RTOL)
     # physics: an opaque layer reflects more than the same layer on black (it adds the
     # light the black substrate would absorb), at every geometry
     assert np.all(values[1] > values[0])
