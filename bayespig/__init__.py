@@ -9,11 +9,8 @@ from .physics.forward import (
 
 __version__ = "0.1.0"
 
-from .instruments import get_instrument, predict  # noqa: E402  (table needs __version__)
-from .table import load_table  # noqa: E402
 from .data import MeasurementError, MeasurementSet, read_measurements, simulate  # noqa: E402
 from .fit import fit_measurements, fit_problem  # noqa: E402
-from .studies.robustness import robustness_study  # noqa: E402
 from .inference import (  # noqa: E402
     ConvergenceWarning,
     InferenceSettings,
@@ -23,27 +20,30 @@ from .inference import (  # noqa: E402
     save_inference,
     summarize,
 )
+from .instruments import get_instrument, predict  # noqa: E402  (table needs __version__)
+from .studies.robustness import robustness_study  # noqa: E402
+from .table import load_table  # noqa: E402
 
 __all__ = [
-    "brdf",
-    "hemispherical_reflectance",
-    "specular_transmittance",
-    "optical_thickness_from_transmittance",
-    "get_instrument",
-    "predict",
-    "load_table",
-    "read_measurements",
-    "simulate",
-    "MeasurementSet",
-    "MeasurementError",
-    "fit_problem",
-    "fit_measurements",
-    "robustness_study",
-    "infer",
-    "InferenceSettings",
     "ConvergenceWarning",
+    "InferenceSettings",
+    "MeasurementError",
+    "MeasurementSet",
+    "brdf",
     "diagnose",
-    "summarize",
-    "save_inference",
+    "fit_measurements",
+    "fit_problem",
+    "get_instrument",
+    "hemispherical_reflectance",
+    "infer",
     "load_inference",
+    "load_table",
+    "optical_thickness_from_transmittance",
+    "predict",
+    "read_measurements",
+    "robustness_study",
+    "save_inference",
+    "simulate",
+    "specular_transmittance",
+    "summarize",
 ]

@@ -17,7 +17,7 @@ from .physics.forward import surface_terms, validate_layer_arguments
 from .physics.fresnel import fresnel_reflectance
 from .physics.geometry import aspecular_to_geometry, geometry_label
 
-__all__ = ["Channel", "Instrument", "BUILT_IN_INSTRUMENTS", "get_instrument", "predict"]
+__all__ = ["BUILT_IN_INSTRUMENTS", "Channel", "Instrument", "get_instrument", "predict"]
 
 CHANNEL_KINDS = ("brdf", "hemispherical", "reflectance_factor")
 

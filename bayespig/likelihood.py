@@ -25,10 +25,10 @@ from .physics.forward import specular_transmittance
 __all__ = [
     "METHODS",
     "FilmTerm",
-    "Problem",
-    "Priors",
     "ForwardModel",
     "LogPosterior",
+    "Priors",
+    "Problem",
     "WavelengthModel",
     "multiplicative_normal_logpdf",
 ]

@@ -49,7 +49,7 @@ from .physics.fresnel import fresnel_reflectance
 from .physics.phase import normalise_on_quadrature, phase_fourier_modes
 from .physics.quadrature import DEFAULT_QUADRATURE_POINTS
 
-__all__ = ["TableSettings", "LookupTable", "build_table", "load_table", "cache_directory"]
+__all__ = ["LookupTable", "TableSettings", "build_table", "cache_directory", "load_table"]
 
 #: Bump when the file layout or the tabulated quantities change.
 FORMAT_VERSION = 2

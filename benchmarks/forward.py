@@ -22,12 +22,11 @@ import sys
 import time
 
 import numpy as np
+from _common import load_average, write_run_section
 from threadpoolctl import threadpool_limits
 
 import bayespig
 from bayespig.physics.quadrature import DEFAULT_QUADRATURE_POINTS
-
-from _common import load_average, write_run_section
 
 SECTION = "## Forward model"
 ASPECULAR = np.array([-15.0, 15.0, 25.0, 45.0, 75.0, 110.0])

@@ -12,9 +12,7 @@ independent value, bayespig, error, tolerance) followed by the convergence table
 The independent references are those of the test suite, ``tests/physics/reference.py``.
 """
 
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +21,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import bayespig
-from bayespig.physics import adding_doubling, fresnel, substrate
+from bayespig._atomic import write_text_atomically
+from bayespig.physics import adding_doubling, forward, fresnel, substrate
 from bayespig.physics.quadrature import DEFAULT_QUADRATURE_POINTS
 from tests.physics import reference as ref
 
@@ -68,6 +67,31 @@ def convergence_table():
             values = brdf_and_hemispherical(a, tau, g, r_s, n_points)
             change = np.abs(values / reference - 1.0)
             rows.append(((a, tau, g, r_s), n_points, change[:-1].max(), change[-1]))
+    return rows
+
+
+#: Phase functions of the coarse-quadrature check (2.0: Rayleigh).
+COARSE_G = (0.3, 0.5, 0.8, 0.9, -0.3, 2.0)
+COARSE_POINTS = 60
+COARSE_SEED = 3
+
+
+def coarse_mode_changes():
+    """Per g: the largest relative change of the six BRDFs over COARSE_POINTS random (a, tau)
+    when the small azimuthal modes go to the coarse quadrature (the default) instead of the full."""
+    rng = np.random.default_rng(COARSE_SEED)
+    a = rng.uniform(0.001, 0.999, COARSE_POINTS)
+    tau = np.exp(rng.uniform(np.log(0.01), np.log(100.0), COARSE_POINTS))
+    geometry = (THETA_I[:, None], THETA_O[:, None], DELTA_PHI[:, None])
+    rows = []
+    for g in COARSE_G:
+        default = bayespig.brdf(*geometry, a=a, tau=tau, g=g, n=N_BINDER)
+        saved, forward.COARSE_AFTER = forward.COARSE_AFTER, 0.0
+        try:
+            full = bayespig.brdf(*geometry, a=a, tau=tau, g=g, n=N_BINDER)
+        finally:
+            forward.COARSE_AFTER = saved
+        rows.append((g, float(np.abs(default / full - 1.0).max())))
     return rows
 
 
@@ -156,7 +180,7 @@ def reference_comparisons():
     return c.rows
 
 
-def markdown(comparisons, table):
+def markdown(comparisons, table, coarse):
     lines = [
         "# Validation of the radiative-transfer core",
         "",
@@ -189,19 +213,21 @@ def markdown(comparisons, table):
         mark = " (default)" if n_points == DEFAULT_QUADRATURE_POINTS else ""
         lines.append(f"| {a:g} | {tau:g} | {g:g} | {r_s:g} | {n_points}{mark} | "
                      f"{f_change:.1e} | {h_change:.1e} |")
+    lines += [
+        "",
+        "## Small azimuthal modes on the coarse quadrature",
+        "",
+        (f"A parameter set's azimuthal modes are solved on half the Gauss points once one of them "
+         f"is below {forward.COARSE_AFTER:g} of its mode 0 at every geometry "
+         "(`bayespig.physics.forward.COARSE_AFTER`). Largest relative change of the six multi-angle "
+         f"BRDFs against every mode on the full quadrature (default n_points), over {COARSE_POINTS} "
+         "random (a, tau) with a in (0.001, 0.999), tau log-uniform in (0.01, 100):"),
+        "",
+        "| g | largest relative change |",
+        "|---|---|",
+        *(f"| {g:g}{' (Rayleigh)' if abs(g) > 1 else ''} | {change:.1e} |" for g, change in coarse),
+    ]
     return "\n".join(lines) + "\n"
-
-
-def write_atomically(path, text):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
 
 
 def main():
@@ -218,7 +244,11 @@ def main():
     for quantity, source, expected, got, error, tolerance, _ in failures:
         print(f"  FAIL {quantity} [{source}]: expected {expected:.6g}, got {got:.6g}, "
               f"error {error:.1e} > {tolerance}")
-    write_atomically(REPORT, markdown(comparisons, table))
+    coarse = coarse_mode_changes()
+    print("\nsmall modes on the coarse quadrature, largest relative change of the BRDFs:")
+    for g, change in coarse:
+        print(f"  g = {g:g}: {change:.1e}")
+    write_text_atomically(REPORT, markdown(comparisons, table, coarse))
     print(f"wrote {REPORT.relative_to(ROOT)}")
 
 

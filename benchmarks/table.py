@@ -39,10 +39,10 @@ from pathlib import Path
 import numpy as np
 
 import bayespig
+from bayespig._validation import domain_points  # the tests' domain sampler
 from bayespig.data import simulate
 from bayespig.instruments import BUILT_IN_INSTRUMENTS, Instrument, predict
 from bayespig.likelihood import ForwardModel, Problem
-from bayespig._validation import domain_points  # the tests' domain sampler
 from bayespig.table import load_table
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))

@@ -34,14 +34,14 @@ from .quadrature import DEFAULT_QUADRATURE_POINTS, binder_quadrature
 __all__ = [
     "START_THICKNESS",
     "START_THICKNESS_HIGHER_MODES",
-    "single_scattering_layer",
-    "start_layer",
-    "double",
-    "layer_mode",
-    "layer_kernels",
     "add_lambertian_substrate",
     "bare_layer_functions",
+    "double",
+    "layer_kernels",
+    "layer_mode",
+    "single_scattering_layer",
     "slab_totals",
+    "start_layer",
 ]
 
 #: Optical thickness of the starting layer. With the Richardson start the spurious

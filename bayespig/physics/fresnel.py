@@ -16,11 +16,11 @@ import numpy as np
 from scipy import integrate
 
 __all__ = [
-    "refracted_cosine",
-    "fresnel_reflectance",
     "critical_cosine",
+    "fresnel_reflectance",
     "internal_diffuse_reflectance",
     "normal_transmittance",
+    "refracted_cosine",
 ]
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["aspecular_to_geometry", "parse_geometry_label", "geometry_label"]
+__all__ = ["aspecular_to_geometry", "geometry_label", "parse_geometry_label"]
 
 _LABEL = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*as\s*([+-]?\d+(?:\.\d+)?)\s*$", re.IGNORECASE)
 

@@ -17,13 +17,13 @@ import numpy as np
 
 __all__ = [
     "henyey_greenstein",
-    "rayleigh",
-    "phase_function",
-    "is_rayleigh",
     "is_isotropic",
+    "is_rayleigh",
     "n_fourier_modes",
-    "phase_fourier_modes",
     "normalise_on_quadrature",
+    "phase_fourier_modes",
+    "phase_function",
+    "rayleigh",
 ]
 
 #: Relative size below which a Fourier mode of the phase function is dropped.

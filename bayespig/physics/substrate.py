@@ -15,10 +15,10 @@ from .forward import _validate_angle, surface_terms, validate_layer_arguments
 from .fresnel import fresnel_reflectance, internal_diffuse_reflectance
 
 __all__ = [
-    "substrate_law_terms",
     "clear_binder_brdf",
     "clear_binder_reflectance",
     "substrate_albedo_from_air",
+    "substrate_law_terms",
 ]
 
 

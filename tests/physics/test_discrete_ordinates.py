@@ -8,7 +8,6 @@ agree to the doubling's own start error (~1e-8), far below the 1e-5 the forward 
 
 import numpy as np
 import pytest
-
 from scipy.integrate import quad
 from scipy.optimize import brentq
 
@@ -128,7 +127,7 @@ def _resonant_absorption(g, mode, theta_in):
         crossing = np.flatnonzero(np.diff(np.sign(gaps[:, j])))
         if crossing.size:
             i = crossing[0]
-            return brentq(lambda a: eigenvalues(a)[j] - rate, grid[i], grid[i + 1], xtol=1e-15)
+            return brentq(lambda a, j=j: eigenvalues(a)[j] - rate, grid[i], grid[i + 1], xtol=1e-15)
     return None
 
 
@@ -153,7 +152,8 @@ def test_growing_integral_across_the_resonance(tau):
     k = inv_mu + np.array([-3.0, -1e-2, -1e-5, 0.0, 1e-8, 1e-4, 2e-3, 5.0]) / tau
     got = discrete_ordinates._growing_integral(np.exp(-tau * inv_mu), np.exp(-tau * k), k - inv_mu, tau)
     for value, rate in zip(got, k):
-        reference = quad(lambda t: np.exp(-t * inv_mu - rate * (tau - t)), 0.0, tau, epsabs=0, epsrel=1e-13)[0]
+        reference = quad(lambda t, rate=rate: np.exp(-t * inv_mu - rate * (tau - t)), 0.0, tau, epsabs=0,
+                         epsrel=1e-13)[0]
         assert value == pytest.approx(reference, rel=1e-12)
 
 
