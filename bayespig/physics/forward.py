@@ -190,7 +190,8 @@ def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=DEFAUL
     n : float
         Refractive index of the binder [-].
     n_points : int
-        Gauss points per quadrature interval.
+        Gauss points per quadrature interval; a parameter set's azimuthal modes below
+        ``COARSE_AFTER`` of its mode 0 go on :func:`coarse_quadrature_points` of them.
     n_modes : int, optional
         Number of azimuthal modes; by default as many as needed until a mode adds
         less than ``MODE_TOLERANCE`` (one for isotropic scattering).
@@ -205,7 +206,7 @@ def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=DEFAUL
         ``"eigen"``: the discrete-ordinate solution with the surface as its top boundary
         (:func:`surface_mode_eigen`), one N x N solve per layer and mode; ``"doubling"``:
         adding-doubling of the layer's kernels and the surface added by :func:`surface_mode`.
-        Both solve the same discrete equations (they agree to ~1e-8).
+        Both solve the same discrete equations (they agree to ~1e-7 of each term).
 
     Returns
     -------
