@@ -29,7 +29,8 @@ Two uses:
   is formed; each layer costs one N x N solve per mode.
 
 The conservative limit ``a -> 0`` makes the smallest ``k`` vanish (the diffusion mode, linear
-in ``tau``), where this form degenerates: such layers (``a <`` :data:`SMALL_ABSORPTION`) go
+in ``tau``), where this form degenerates, and in very thin layers its O(1) terms cancel to an
+O(tau) result: such layers (``a <`` :data:`SMALL_ABSORPTION`, ``tau <`` :data:`THIN_LAYER`) go
 through doubling.
 
 References
@@ -46,11 +47,15 @@ import numpy as np
 
 from .adding_doubling import START_THICKNESS, layer_mode
 
-__all__ = ["SMALL_ABSORPTION", "layer_mode_eigen", "radiances_under_surface"]
+__all__ = ["SMALL_ABSORPTION", "THIN_LAYER", "layer_mode_eigen", "radiances_under_surface"]
 
 #: Below this relative absorption the diffusion mode's ``k ~ sqrt(3 a)`` nears 0 and the eigen
 #: form loses accuracy; such layers go through doubling.
 SMALL_ABSORPTION = 1e-4
+#: Below this optical thickness the eigen form's O(1) terms cancel to a reflection of O(tau),
+#: losing ~1e-16 / tau of it (4e-4 at tau = 1e-12): such layers go through doubling, whose
+#: single-scattering start is exact there.
+THIN_LAYER = 1e-6
 #: Attenuation factors ``e^{-k tau}`` below this are set to zero (their products would be
 #: subnormal numbers, slow to compute with, and they are far below any accuracy that matters).
 NEGLIGIBLE_ATTENUATION = 1e-100

@@ -33,7 +33,7 @@ from .adding_doubling import (
     add_lambertian_substrate,
     layer_mode,
 )
-from .discrete_ordinates import SMALL_ABSORPTION, radiances_under_surface
+from .discrete_ordinates import SMALL_ABSORPTION, THIN_LAYER, radiances_under_surface
 from .fresnel import fresnel_reflectance, normal_transmittance, refracted_cosine
 from .phase import is_rayleigh, n_fourier_modes, normalise_on_quadrature, phase_fourier_modes
 from .quadrature import DEFAULT_QUADRATURE_POINTS, binder_quadrature
@@ -403,8 +403,9 @@ def surface_mode_eigen(geometry, a, tau, p_reflection, p_transmission, first_mod
     with the surface as the top boundary (:func:`~bayespig.physics.discrete_ordinates.radiances_under_surface`).
 
     Layers with ``a <`` :data:`~bayespig.physics.discrete_ordinates.SMALL_ABSORPTION` (the
-    eigen form degenerates as ``a -> 0``) or ``tau = 0`` go through doubling and
-    :func:`surface_mode`.
+    eigen form degenerates as ``a -> 0``) or ``tau <``
+    :data:`~bayespig.physics.discrete_ordinates.THIN_LAYER` (its O(1) terms cancel to an
+    O(tau) result) go through doubling and :func:`surface_mode`.
 
     Parameters
     ----------
@@ -424,7 +425,7 @@ def surface_mode_eigen(geometry, a, tau, p_reflection, p_transmission, first_mod
         As :func:`mode_terms`.
     """
     gm = geometry
-    doubled = (a < SMALL_ABSORPTION) | (tau == 0.0)
+    doubled = (a < SMALL_ABSORPTION) | (tau < THIN_LAYER)
     parts = []
     if doubled.any():
         R, T, direct = layer_mode(gm.mu, gm.weight, a[doubled], tau[doubled], p_reflection, p_transmission,

@@ -102,7 +102,7 @@ def test_surface_terms_eigen_equals_doubling(g, opaque):
     rng = np.random.default_rng(17)
     a = np.concatenate([[0.0, 0.5 * SMALL_ABSORPTION, 2 * SMALL_ABSORPTION, 1.0], rng.uniform(0.0, 1.0, 20)])
     tau = np.full(a.size, np.inf) if opaque else np.concatenate(
-        [[0.0, 1.0, 3.0, 0.0], np.exp(rng.uniform(np.log(1e-3), np.log(100.0), 20))])
+        [[0.0, 1.0, 3.0, 0.0], np.exp(rng.uniform(np.log(1e-3), np.log(100.0), 17)), [1e-12, 1e-9, 2e-6]])
     n_modes = 6 if g not in (0.0, 5.0) else None
     eigen = surface_terms(THETA_IN, THETA_OUT, a=a, tau=tau, g=g, n_modes=n_modes)
     doubling = surface_terms(THETA_IN, THETA_OUT, a=a, tau=tau, g=g, n_modes=n_modes, solver="doubling")
@@ -171,3 +171,18 @@ def test_results_do_not_depend_on_the_batch():
             if name == "f0_modes":  # the batch stores as many modes as its slowest member needs
                 x = np.concatenate([x, np.zeros((y.shape[0] - x.shape[0],) + x.shape[1:])])
             np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-300)
+
+
+def test_thin_layers_keep_their_relative_accuracy():
+    """A film of tau ~ 1e-12 reflects ~1e-12: each value to 1e-6 of itself, not of the batch."""
+    tau = np.array([1e-12, 1e-9, 1e-7, 3e-6, 1e-4])
+    a = np.full(tau.size, 0.3)
+    eigen = surface_terms([8.0, 45.0], [0.0, 60.0], a=a, tau=tau, g=0.5)
+    doubling = surface_terms([8.0, 45.0], [0.0, 60.0], a=a, tau=tau, g=0.5, solver="doubling")
+    for name in ("h0", "f0_modes"):
+        x, y = getattr(eigen, name), getattr(doubling, name)
+        if name == "f0_modes":
+            modes = min(x.shape[1], y.shape[1])
+            x, y = x[:, :modes], y[:, :modes]
+        per_row = np.abs(x - y).reshape(tau.size, -1).max(axis=1) / np.abs(y).reshape(tau.size, -1).max(axis=1)
+        assert per_row.max() < SOLVERS_REL_TOL, (name, per_row)
