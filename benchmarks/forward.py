@@ -160,11 +160,10 @@ def main(argv=None):
     write_run_section(SECTION, "python benchmarks/forward.py", [
         "Time per (a, tau) point of the forward model, the BRDF at six multi-angle geometries, over a",
         "64 x 64 grid in one batched call (default 2 worker threads), against iadpython's adding-doubling",
-        "for normal-incidence totals (all it can compute). Accuracy: bayespig, largest relative change",
-        f"of the BRDFs at {ACCURACY_SUBSET} random grid points against {BAYESPIG_REFERENCE_POINTS} points per interval;",
-        f"iadpython, largest change of UR1/UT1 at its {IADPYTHON_SUBSET} timed points against quad_pts",
-        f"{IADPYTHON_REFERENCE_POINTS}. Goal (issue 2): at least 10x faster per point",
-        "at equal accuracy (1e-4).",
+        "for normal-incidence totals (all it can compute). Accuracy: bayespig, largest relative change of",
+        f"the BRDFs at {ACCURACY_SUBSET} random grid points against {BAYESPIG_REFERENCE_POINTS} points per interval; iadpython,",
+        f"largest change of UR1/UT1 at its {IADPYTHON_SUBSET} timed points against quad_pts {IADPYTHON_REFERENCE_POINTS}.",
+        "Goal (issue 2): at least 10x faster per point at equal accuracy (1e-4).",
     ], lines, after=[
         "| g | speed-up, equal quadrature | speed-up, equal accuracy | goal |",
         "|---|---|---|---|",
