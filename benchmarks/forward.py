@@ -11,9 +11,10 @@ normal incidence (UR1, UT1, URU, UTU) and loops over points in Python; it is tim
 random subset of the same grid and scaled per point, through its array interface, both with
 the BLAS as loaded and limited to one thread (the faster counts). The two codes take turns over
 several rounds and each setting keeps its best time. Both are timed at several
-quadratures; the accuracy of each is its largest change against a much finer quadrature, so the
-comparison can be made at equal quadrature (32 binder nodes) and at equal accuracy (the
-fastest setting of each within 1e-4). The machine is shared: timings are wall-clock minima of
+quadratures; the accuracy of each is its largest relative change against a much finer
+quadrature over 400 random grid points (the BRDFs; UR1 and UT1), so the comparison can be made
+at equal quadrature (32 binder nodes) and at equal accuracy (the fastest setting of each
+within 1e-4). The machine is shared: timings are wall-clock minima of
 repeated runs; the load average is printed.
 """
 
@@ -42,7 +43,7 @@ IADPYTHON_SUBSET = 48
 #: bayespig Gauss points per interval timed (two intervals in the binder: twice as many nodes).
 BAYESPIG_POINTS = (DEFAULT_QUADRATURE_POINTS, 14, 12)
 #: iadpython quadrature points timed (its quad_pts: nodes in the slab).
-IADPYTHON_POINTS = (2 * DEFAULT_QUADRATURE_POINTS, 24, 16)
+IADPYTHON_POINTS = (40, 2 * DEFAULT_QUADRATURE_POINTS, 24)
 #: Reference quadratures for the accuracy columns.
 BAYESPIG_REFERENCE_POINTS = 32
 IADPYTHON_REFERENCE_POINTS = 48
@@ -50,6 +51,8 @@ IADPYTHON_REFERENCE_POINTS = 48
 #: error: at g = 0.5, 10 points per interval measured 8e-5 on 24 points and 3e-4 on 400).
 ACCURACY_SUBSET = 400
 GOAL_ACCURACY = 1e-4
+#: UT1 below this (thick films) is left out of iadpython's relative accuracy.
+SIGNIFICANT_TRANSMITTANCE = 1e-3
 REPEATS = 5
 SEED = 20240602
 
@@ -95,6 +98,16 @@ def iadpython_time(points, g, quad_pts):
         return min(best, iadpython_run(points, g, quad_pts)[0])
 
 
+def iadpython_accuracy(values, reference):
+    """Largest relative change of UR1, and of UT1 where it exceeds SIGNIFICANT_TRANSMITTANCE.
+
+    Relative, as bayespig's accuracy is: an absolute 1e-4 on a total of 0.01 would be 1 %.
+    """
+    change = np.abs(values / reference - 1.0)
+    significant = reference[:, 1] > SIGNIFICANT_TRANSMITTANCE
+    return float(max(change[:, 0].max(), change[significant, 1].max(initial=0.0)))
+
+
 def fastest_within(rows):
     """The (label, seconds, accuracy) row of least time whose accuracy meets GOAL_ACCURACY."""
     good = [row for row in rows if row[2] <= GOAL_ACCURACY]
@@ -138,14 +151,15 @@ def main(argv=None):
                 per_point = bayespig_time(g, n_points) / (A_GRID.size * TAU_GRID.size)
                 bp_best[n_points] = min(bp_best[n_points], per_point)
         iad_rows = [(f"quad_pts {quad}", iad_best[quad],
-                     float(np.max(np.abs(iadpython_run(iad_accuracy_points, g, quad)[1] - reference))))
+                     iadpython_accuracy(iadpython_run(iad_accuracy_points, g, quad)[1], reference))
                     for quad in IADPYTHON_POINTS]
         bp_rows = [(f"{n_points}/interval = {2 * n_points} nodes", bp_best[n_points],
                     bayespig_accuracy(g, n_points, *accuracy_points)) for n_points in BAYESPIG_POINTS]
         for code, rows in (("bayespig", bp_rows), ("iadpython", iad_rows)):
             for label, per_point, accuracy in rows:
                 say(f"{code:>10} {label:>22} {1e3 * per_point:>9.3f} {accuracy:>9.1e}")
-        equal_quadrature = iad_rows[0][1] / bp_rows[0][1]
+        same_nodes = IADPYTHON_POINTS.index(2 * DEFAULT_QUADRATURE_POINTS)
+        equal_quadrature = iad_rows[same_nodes][1] / bp_rows[0][1]
         say(f"speed-up at equal quadrature (32 nodes): {equal_quadrature:.1f}x")
         bp_best, iad_best = fastest_within(bp_rows), fastest_within(iad_rows)
         if bp_best and iad_best:
@@ -165,8 +179,8 @@ def main(argv=None):
         "64 x 64 grid in one batched call (default 2 worker threads), against iadpython's adding-doubling",
         "for normal-incidence totals (all it can compute). Accuracy: bayespig, largest relative change of",
         f"the BRDFs at {ACCURACY_SUBSET} random grid points against {BAYESPIG_REFERENCE_POINTS} points per interval; iadpython,",
-        f"largest change of UR1/UT1 at the same points against quad_pts {IADPYTHON_REFERENCE_POINTS} (absolute; they are",
-        f"totals). iadpython is timed on {IADPYTHON_SUBSET} of the points.",
+        f"largest relative change of UR1 (and of UT1 where above {SIGNIFICANT_TRANSMITTANCE:g}) at the same points against",
+        f"quad_pts {IADPYTHON_REFERENCE_POINTS}. iadpython is timed on {IADPYTHON_SUBSET} of the points.",
         "Goal (issue 2): at least 10x faster per point at equal accuracy (1e-4).",
     ], lines, after=[
         "| g | speed-up, equal quadrature | speed-up, equal accuracy | goal |",
