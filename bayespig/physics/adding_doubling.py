@@ -29,7 +29,7 @@ import numpy as np
 
 from .fresnel import fresnel_reflectance
 from .phase import n_fourier_modes, normalise_on_quadrature, phase_fourier_modes
-from .quadrature import DEFAULT_QUADRATURE_POINTS, binder_quadrature
+from .quadrature import binder_quadrature, default_quadrature_points
 
 __all__ = [
     "START_THICKNESS",
@@ -266,7 +266,7 @@ def add_lambertian_substrate(R, T, direct, c, r_s):
     return R + direct[:, :, None] * up + (T * c) @ up
 
 
-def bare_layer_functions(mu_out, mu_in, *, a, tau, g=0.0, n_points=DEFAULT_QUADRATURE_POINTS):
+def bare_layer_functions(mu_out, mu_in, *, a, tau, g=0.0, n_points=None):
     """Reflection and transmission functions of a bare layer (no interfaces, n = 1).
 
     These are van de Hulst's ``R(mu, mu0)`` and ``T(mu, mu0)``: ``pi`` times the
@@ -282,8 +282,8 @@ def bare_layer_functions(mu_out, mu_in, *, a, tau, g=0.0, n_points=DEFAULT_QUADR
         Optical thickness [-]; ``inf`` for a semi-infinite layer.
     g : float
         Phase-function parameter (paper convention).
-    n_points : int
-        Gauss points of the quadrature.
+    n_points : int, optional
+        Gauss points of the quadrature (default: ``default_quadrature_points(g)``).
 
     Returns
     -------
@@ -292,6 +292,7 @@ def bare_layer_functions(mu_out, mu_in, *, a, tau, g=0.0, n_points=DEFAULT_QUADR
     """
     mu_out = np.atleast_1d(np.asarray(mu_out, dtype=float))
     mu_in = np.atleast_1d(np.asarray(mu_in, dtype=float))
+    n_points = default_quadrature_points(g) if n_points is None else n_points
     mu, weight = binder_quadrature(n_points, 1.0, np.concatenate([mu_out, mu_in]))
     R, T, _ = layer_kernels(mu, weight, np.array([a]), np.array([tau]), g, n_modes=1)
     n0 = mu.size - mu_out.size - mu_in.size
@@ -300,7 +301,7 @@ def bare_layer_functions(mu_out, mu_in, *, a, tau, g=0.0, n_points=DEFAULT_QUADR
     return R[0, 0][np.ix_(rows, cols)] / 2.0, T[0, 0][np.ix_(rows, cols)] / 2.0
 
 
-def slab_totals(*, a, tau, g=0.0, n=1.0, n_points=DEFAULT_QUADRATURE_POINTS):
+def slab_totals(*, a, tau, g=0.0, n=1.0, n_points=None):
     """Total reflectance and transmittance of a slab in air with Fresnel faces.
 
     A test configuration (not a paint layer): both faces are smooth interfaces to
@@ -316,8 +317,8 @@ def slab_totals(*, a, tau, g=0.0, n=1.0, n_points=DEFAULT_QUADRATURE_POINTS):
         Phase-function parameter (paper convention).
     n : float
         Refractive index of the slab [-].
-    n_points : int
-        Gauss points per quadrature interval.
+    n_points : int, optional
+        Gauss points per quadrature interval (default: ``default_quadrature_points(g)``).
 
     Returns
     -------
@@ -326,6 +327,7 @@ def slab_totals(*, a, tau, g=0.0, n=1.0, n_points=DEFAULT_QUADRATURE_POINTS):
         incidence (specular reflection and unscattered beam included); ``URU``,
         ``UTU``: the same for diffuse incidence [-].
     """
+    n_points = default_quadrature_points(g) if n_points is None else n_points
     mu, weight = binder_quadrature(n_points, n, extra_nodes=[1.0])
     c = mu * weight
     N = mu.size

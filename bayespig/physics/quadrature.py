@@ -19,10 +19,39 @@ import numpy as np
 
 from .fresnel import critical_cosine
 
-__all__ = ["DEFAULT_QUADRATURE_POINTS", "binder_quadrature"]
+__all__ = ["DEFAULT_QUADRATURE_POINTS", "MAX_DEFAULT_QUADRATURE_POINTS", "binder_quadrature",
+           "default_quadrature_points"]
 
-#: Default number of Gauss points per interval (two intervals when n > 1).
+#: Default number of Gauss points per interval (two intervals when n > 1), for |g| <= 0.8.
 DEFAULT_QUADRATURE_POINTS = 16
+#: Most points per interval :func:`default_quadrature_points` chooses (|g| = 0.95).
+MAX_DEFAULT_QUADRATURE_POINTS = 64
+
+
+def default_quadrature_points(g):
+    """Gauss points per interval that converge the BRDF to 1e-4 (relative) for the phase function.
+
+    A Henyey–Greenstein forward peak of width ~(1 - |g|) needs ~3.2 / (1 - |g|) points per
+    interval, in steps of 8 and at least :data:`DEFAULT_QUADRATURE_POINTS`: 16 up to
+    |g| = 0.8, 24 at 0.85, 32 at 0.9, 64 at 0.95 (measured, reports/validation.md). Beyond
+    |g| = 0.95 the choice stops at :data:`MAX_DEFAULT_QUADRATURE_POINTS`, which no longer
+    converges to 1e-4 there: pass ``n_points`` explicitly. Rayleigh scattering (|g| > 1) needs
+    the default.
+
+    Parameters
+    ----------
+    g : float
+        Phase-function parameter (paper's convention).
+
+    Returns
+    -------
+    int
+    """
+    g = abs(float(g))
+    if g <= 0.8 or g > 1.0:
+        return DEFAULT_QUADRATURE_POINTS
+    needed = 8 * int(np.ceil(3.2 / (1.0 - g) / 8.0 - 1e-9))
+    return int(min(max(needed, DEFAULT_QUADRATURE_POINTS), MAX_DEFAULT_QUADRATURE_POINTS))
 
 
 def _gauss(n_points, lo, hi):

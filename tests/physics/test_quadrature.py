@@ -1,0 +1,41 @@
+"""The default quadrature for a phase function (bayespig.physics.quadrature).
+
+Reference: the same solver on twice as many points (convergence), the issue's 1e-4 budget.
+"""
+
+import numpy as np
+import pytest
+
+import bayespig
+from bayespig.physics.quadrature import (
+    DEFAULT_QUADRATURE_POINTS,
+    MAX_DEFAULT_QUADRATURE_POINTS,
+    default_quadrature_points,
+)
+
+#: Issue 2: the default quadrature converged to 1e-4 relative.
+CONVERGED_REL_TOL = 1e-4
+ASPECULAR = np.array([-15.0, 15.0, 25.0, 45.0, 75.0, 110.0])
+THETA_O = np.abs(45.0 - ASPECULAR)
+DELTA_PHI = np.where(45.0 - ASPECULAR >= 0, 180.0, 0.0)
+
+
+def test_default_points_grow_with_the_forward_peak():
+    assert default_quadrature_points(0.0) == DEFAULT_QUADRATURE_POINTS
+    assert default_quadrature_points(-0.8) == DEFAULT_QUADRATURE_POINTS
+    assert default_quadrature_points(2.0) == DEFAULT_QUADRATURE_POINTS  # Rayleigh
+    assert default_quadrature_points(0.85) == 24
+    assert default_quadrature_points(0.9) == default_quadrature_points(-0.9) == 32
+    assert default_quadrature_points(0.99) == MAX_DEFAULT_QUADRATURE_POINTS
+
+
+@pytest.mark.parametrize("g", [0.85, 0.9])
+def test_default_quadrature_is_converged_for_peaked_phase_functions(g):
+    """The six multi-angle BRDFs at the default points against twice as many."""
+    rng = np.random.default_rng(4)
+    a = rng.uniform(0.001, 0.999, 12)
+    tau = np.exp(rng.uniform(np.log(0.01), np.log(100.0), 12))
+    geometry = (45.0, THETA_O[:, None], DELTA_PHI[:, None])
+    default = bayespig.brdf(*geometry, a=a, tau=tau, g=g)
+    finer = bayespig.brdf(*geometry, a=a, tau=tau, g=g, n_points=2 * default_quadrature_points(g))
+    assert np.abs(default / finer - 1.0).max() < CONVERGED_REL_TOL
