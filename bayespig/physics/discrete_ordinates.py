@@ -53,14 +53,15 @@ __all__ = ["SMALL_ABSORPTION", "THIN_LAYER", "layer_mode_eigen", "radiances_unde
 #: form loses accuracy; such layers go through doubling.
 SMALL_ABSORPTION = 1e-4
 #: Below this optical thickness the eigen form's O(1) terms cancel to a reflection of O(tau),
-#: losing ~1e-16 / tau of it (4e-4 at tau = 1e-12): such layers go through doubling, whose
-#: single-scattering start is exact there.
+#: losing ~1e-16 / tau of it: such layers go through doubling, whose single-scattering start
+#: is exact there (tests/physics/test_discrete_ordinates.py, thin layers to 2e-6 of themselves).
 THIN_LAYER = 1e-6
 #: Attenuation factors ``e^{-k tau}`` below this are set to zero (their products would be
 #: subnormal numbers, slow to compute with, and they are far below any accuracy that matters).
 NEGLIGIBLE_ATTENUATION = 1e-100
 #: Matrix entries of a block of layers solved together in :func:`radiances_under_surface`: 32
-#: layers at N = 32 nodes, ~0.25 MB per (B, N, N) array, fit the core's cache.
+#: layers at N = 32 nodes, ~0.25 MB per (B, N, N) array (whole chunks as one block: 4-9 %
+#: slower, benchmarks/forward_settings.py).
 ROW_BLOCK_ENTRIES = 32 * 32 * 32
 #: A beam whose rate ``1/u`` lies within this relative distance of an eigenvalue ``k`` is near
 #: the resonance of its particular solution (error ~3e-14 / distance).
@@ -355,9 +356,7 @@ def radiances_under_surface(mu, weight, a, tau, p_reflection, p_transmission, r_
         if substrate:
             out["up"] = np.empty((tau.size, n, g.shape[-1]))
             out["down"] = np.empty((tau.size, n, g.shape[-1]))
-        # in blocks small enough for the core's cache (a block's (B, N, N) arrays, ~0.25 MB each,
-        # run 2-3 times faster than the same work on 256 rows at once), and no smaller: a coarse
-        # quadrature takes more layers per block (measured 20-25 % faster at g = 0.5)
+        # in blocks of ~0.25 MB (B, N, N) arrays, so a coarse quadrature takes more layers per block
         block = max(1, ROW_BLOCK_ENTRIES // (n * n))
         for start in range(0, tau.size, block):
             rows = slice(start, start + block)

@@ -64,8 +64,8 @@ COARSE_AFTER = 3e-2
 COARSE_MIN_POINTS = 4
 #: Parameter sets solved together: at least CHUNK, at most MAX_CHUNK (memory of the doubling
 #: path: chunk x nodes^2 x 8 bytes per kernel), two jobs per thread in between. Per-``a`` work
-#: (eigen decompositions, beam solutions) is shared within a chunk: 1024 sets measured 11-15 %
-#: faster than 256 at g = 0.5.
+#: (eigen decompositions, beam solutions) is shared within a chunk (benchmarks/forward_settings.py:
+#: at most 256 sets is ~1.2x slower at g = 0.5, about the same isotropic).
 CHUNK = 256
 MAX_CHUNK = 1024
 #: Threads solving chunks concurrently.
@@ -247,7 +247,7 @@ def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=None,
 
     # numpy's batched linear algebra releases the GIL: one chunk per core, each with a
     # single-threaded BLAS (BLAS threads split 32 x 32 products into pieces too small to pay
-    # for their synchronisation, and oversubscribe the cores: measured 2-3 times slower)
+    # for their synchronisation and oversubscribe the cores: ~1.2-1.3x slower, benchmarks/forward_settings.py)
     with _blas_controller().limit(limits=1, user_api="blas"):
         if len(jobs) > 1 and THREADS > 1:
             with ThreadPoolExecutor(max_workers=THREADS) as pool:
@@ -485,7 +485,7 @@ def _solve_chunk(levels, a, tau, adaptive, start_thickness, included_substrate, 
     parameter set's modes go to the coarse one once a mode of it is below ``COARSE_AFTER``
     of its mode 0 at every geometry: the modes that follow are smaller still (they decay
     geometrically), so the coarse quadrature's relative error, ~1e-3, costs them < 1e-5 of the
-    BRDF (reports/validation.md: measured <= 3e-6 for |g| <= 0.8).
+    BRDF (reports/validation.md: measured <= 2e-6 for |g| <= 0.9).
     """
     f_modes = []
     terms = {}
