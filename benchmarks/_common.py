@@ -10,6 +10,30 @@ from bayespig._atomic import write_text_atomically
 REPORT = Path(__file__).resolve().parent.parent / "reports" / "benchmarks.md"
 
 
+class Transcript:
+    """``say(text)``: print a line of a benchmark's output and keep it (``.lines``) for its
+    section of the report."""
+
+    def __init__(self, *lines):
+        self.lines = list(lines)
+        for line in lines:
+            print(line, flush=True)
+
+    def __call__(self, text=""):
+        print(text, flush=True)
+        self.lines.append(text)
+
+
+def machine_line():
+    """bayespig's and Python's versions, the cores and the load average, for a run's first line."""
+    import sys
+
+    import bayespig
+
+    return (f"bayespig {bayespig.__version__}, python {sys.version.split()[0]}, {os.cpu_count()} cores, "
+            f"load average {load_average()}")
+
+
 def load_average():
     """The 1, 5 and 15 minute load averages as text (the machine may be shared)."""
     return "n/a" if not hasattr(os, "getloadavg") else " ".join(f"{x:.2f}" for x in os.getloadavg())

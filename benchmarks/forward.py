@@ -19,12 +19,11 @@ repeated runs; the load average is printed.
 """
 
 import argparse
-import os
 import sys
 import time
 
 import numpy as np
-from _common import load_average, write_run_section
+from _common import Transcript, load_average, machine_line, write_run_section
 from threadpoolctl import threadpool_limits
 
 import bayespig
@@ -119,14 +118,7 @@ def main(argv=None):
     parser.add_argument("--no-write", action="store_true", help="print only; leave reports/benchmarks.md")
     args = parser.parse_args(argv)
     rng = np.random.default_rng(SEED)
-    lines = []
-
-    def say(text=""):
-        print(text, flush=True)
-        lines.append(text)
-
-    say(f"bayespig {bayespig.__version__}, python {sys.version.split()[0]}, {os.cpu_count()} cores, "
-        f"load average {load_average()}")
+    say = Transcript(machine_line())
     say(f"geometries: 45as{', 45as'.join(f'{x:g}' for x in ASPECULAR)} (theta_o = {THETA_O.tolist()}, "
         f"delta_phi = {DELTA_PHI.tolist()}); n = {N_BINDER}")
     say(f"grid: a in [{A_GRID[0]}, {A_GRID[-1]}] x tau log-spaced [{TAU_GRID[0]}, {TAU_GRID[-1]}], "
@@ -182,7 +174,7 @@ def main(argv=None):
         f"largest relative change of UR1 (and of UT1 where above {SIGNIFICANT_TRANSMITTANCE:g}) at the same points against",
         f"quad_pts {IADPYTHON_REFERENCE_POINTS}. iadpython is timed on {IADPYTHON_SUBSET} of the points.",
         "Goal (issue 2): at least 10x faster per point at equal accuracy (1e-4).",
-    ], lines, after=[
+    ], say.lines, after=[
         "| g | speed-up, equal quadrature | speed-up, equal accuracy | goal |",
         "|---|---|---|---|",
         *(f"| {g:g} | {q:.1f}x | {r:.1f}x | {'met' if r >= 10 and q >= 10 else 'not met'} (>= 10x) |"

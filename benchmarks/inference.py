@@ -40,7 +40,7 @@ from concurrent.futures import Future
 from pathlib import Path
 
 import numpy as np
-from _common import load_average, write_run_section
+from _common import Transcript, load_average, write_run_section
 
 import bayespig
 from bayespig._atomic import atomic_path
@@ -231,14 +231,8 @@ def main(argv=None):
     parser.add_argument("--skip-moves", action="store_true", help="skip the move comparison")
     args = parser.parse_args(argv)
     settings = InferenceSettings()
-    lines = [(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-             f"python {platform.python_version()}, load average at start {load_average()}")]
-
-    def say(line):
-        print(line, flush=True)
-        lines.append(line)
-
-    print(lines[0], flush=True)
+    say = Transcript(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+                     f"python {platform.python_version()}, load average at start {load_average()}")
     spectrum()  # warm-up: imports, tables in this process and in the pool's
     one_core, one_core_ess, one_core_rhat, n_bands = spectrum(InlineExecutor())
     per_band = one_core / n_bands
@@ -305,7 +299,7 @@ def main(argv=None):
             "",
             "![autocorrelation of a per move mixture](inference-moves.png)",
         ]
-    write_run_section(SECTION, "python benchmarks/inference.py", description, lines, after)
+    write_run_section(SECTION, "python benchmarks/inference.py", description, say.lines, after)
     return 0
 
 

@@ -23,7 +23,7 @@ import sys
 import time
 
 import numpy as np
-from _common import load_average, write_run_section
+from _common import Transcript, load_average, write_run_section
 
 from bayespig.physics.adding_doubling import (
     START_THICKNESS,
@@ -50,12 +50,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--no-write", action="store_true", help="print only")
     args = parser.parse_args(argv)
-    lines = []
-
-    def say(line):
-        print(line, flush=True)
-        lines.append(line)
-
+    say = Transcript()
     say(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, python "
         f"{platform.python_version()}, load average {load_average()}")
     mu, weight = binder_quadrature(DEFAULT_QUADRATURE_POINTS, N_BINDER)
@@ -91,7 +86,7 @@ def main(argv=None):
         "builder's solver) against the discrete-ordinate eigen solution (`layer_mode_eigen`). The",
         "forward model solves the same equations as a boundary-value problem under the surface",
         "(`radiances_under_surface`), timed in the section \"Forward model\".",
-    ], lines)
+    ], say.lines)
     return 0
 
 

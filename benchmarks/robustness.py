@@ -24,7 +24,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from _common import load_average, write_run_section
+from _common import Transcript, load_average, write_run_section
 
 import bayespig
 from bayespig.studies.robustness import PAPER_A0, PAPER_METHODS, PAPER_TAU0, robustness_study
@@ -61,12 +61,7 @@ def main(argv=None):
         "--dask", action="store_true", help="also time a local dask.distributed cluster"
     )
     args = parser.parse_args(argv)
-    lines = []
-
-    def say(text):
-        print(text)
-        lines.append(text)
-
+    say = Transcript()
     say(
         f"bayespig {bayespig.__version__}, numpy {np.__version__}, "
         f"Python {platform.python_version()}, "
@@ -140,7 +135,7 @@ def main(argv=None):
                 f"| {verdict} |"
             ),
         ]
-        write_run_section(SECTION, "python benchmarks/robustness.py", description, lines, after)
+        write_run_section(SECTION, "python benchmarks/robustness.py", description, say.lines, after)
     return 0
 
 

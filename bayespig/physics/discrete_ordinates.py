@@ -59,10 +59,6 @@ THIN_LAYER = 1e-6
 #: Attenuation factors ``e^{-k tau}`` below this are set to zero (their products would be
 #: subnormal numbers, slow to compute with, and they are far below any accuracy that matters).
 NEGLIGIBLE_ATTENUATION = 1e-100
-#: Matrix entries of a block of layers solved together in :func:`radiances_under_surface`: 32
-#: layers at N = 32 nodes, ~0.25 MB per (B, N, N) array (whole chunks as one block: 4-9 %
-#: slower, benchmarks/forward_settings.py).
-ROW_BLOCK_ENTRIES = 32 * 32 * 32
 #: A beam whose rate ``1/u`` lies within this relative distance of an eigenvalue ``k`` is near
 #: the resonance of its particular solution (error ~3e-14 / distance).
 RESONANCE_GAP = 1e-3
@@ -350,18 +346,9 @@ def radiances_under_surface(mu, weight, a, tau, p_reflection, p_transmission, r_
     inv_mu = 1.0 / mu[views]
     if opaque:
         out = _opaque_under_surface(per_a, inv_mu, substrate)
-        out = {key: None if value is None else value[which] for key, value in out.items()}
+        out = {key: value[which] for key, value in out.items()}
     else:
-        out = {"up_view": np.empty((tau.size, inv_mu.size, g.shape[-1]))}
-        if substrate:
-            out["up"] = np.empty((tau.size, n, g.shape[-1]))
-            out["down"] = np.empty((tau.size, n, g.shape[-1]))
-        # in blocks of ~0.25 MB (B, N, N) arrays, so a coarse quadrature takes more layers per block
-        block = max(1, ROW_BLOCK_ENTRIES // (n * n))
-        for start in range(0, tau.size, block):
-            rows = slice(start, start + block)
-            for key, value in _rows_under_surface(which[rows], tau[rows], per_a, inv_mu, substrate).items():
-                out[key][rows] = value
+        out = _rows_under_surface(which, tau, per_a, inv_mu, substrate)
     # the beam columns combined into the beams (with the substrate column passed through)
     n_beams = len(beams)
     combine = np.zeros((distinct.size, g.shape[-1], n_beams + g.shape[-1] - columns.size))

@@ -62,12 +62,9 @@ MODE_TOLERANCE = 1e-6
 COARSE_AFTER = 3e-2
 #: Fewest Gauss points per interval of the coarse quadrature.
 COARSE_MIN_POINTS = 4
-#: Parameter sets solved together: at least CHUNK, at most MAX_CHUNK (memory of the doubling
-#: path: chunk x nodes^2 x 8 bytes per kernel), two jobs per thread in between. Per-``a`` work
-#: (eigen decompositions, beam solutions) is shared within a chunk (benchmarks/forward_settings.py:
-#: at most 256 sets is ~1.2x slower at g = 0.5, about the same isotropic).
+#: Parameter sets solved together, one job per worker thread at a time (chunks of 1024 measured
+#: 1.25-1.33x slower isotropic, the same at g = 0.5: benchmarks/forward_settings.py).
 CHUNK = 256
-MAX_CHUNK = 1024
 #: Threads solving chunks concurrently.
 THREADS = min(2, os.cpu_count() or 1)
 #: Layer solvers of :func:`surface_terms`.
@@ -237,8 +234,7 @@ def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=None,
     jobs = []
     for opaque in (False, True):
         select = np.flatnonzero(np.isinf(tau) == opaque)
-        chunk = int(np.clip(np.ceil(select.size / (2 * THREADS)), CHUNK, MAX_CHUNK))
-        jobs.extend(select[start:start + chunk] for start in range(0, select.size, chunk))
+        jobs.extend(select[start:start + CHUNK] for start in range(0, select.size, CHUNK))
     adaptive = n_modes is None and not is_rayleigh(g)
 
     def solve(rows):
@@ -247,7 +243,7 @@ def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=None,
 
     # numpy's batched linear algebra releases the GIL: one chunk per core, each with a
     # single-threaded BLAS (BLAS threads split 32 x 32 products into pieces too small to pay
-    # for their synchronisation and oversubscribe the cores: ~1.2-1.3x slower, benchmarks/forward_settings.py)
+    # for their synchronisation and oversubscribe the cores: 1.4-1.6x slower, benchmarks/forward_settings.py)
     with _blas_controller().limit(limits=1, user_api="blas"):
         if len(jobs) > 1 and THREADS > 1:
             with ThreadPoolExecutor(max_workers=THREADS) as pool:
