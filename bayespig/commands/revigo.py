@@ -23,11 +23,15 @@ def add_revigo_parser(subparsers):
     parser.add_argument("--specular", choices=("auto", "excluded", "included"), default="auto",
                         help="instrument hypothesis for the tints (default: decide from the evidence)")
     parser.add_argument("--posterior", action="store_true",
-                        help="also sample posteriors (bayespig infer) and report 90 %% credible colour "
-                        "regions of the predicted tints (slow: about a minute per film)")
+                        help="also sample every film's posterior (bayespig infer, method 4), check "
+                        "where the model cannot reproduce it, and report 90 %% credible colour "
+                        "regions of the predicted tints (about 5 s per film)")
     parser.add_argument("--eps", type=float, default=None,
                         help="relative measurement error assumed for the posteriors (default 0.01)")
     parser.add_argument("--draws", type=int, default=200, help="posterior predictive draws per tint")
+    parser.add_argument("--g-sensitivity", type=float, nargs="*", default=None, metavar="G",
+                        help="also predict the tints at these fixed phase-function g (default "
+                        "0.3 0.6; none to skip; uses the 8d-sce table with a g axis)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--quiet", action="store_true", help="no progress messages")
     parser.set_defaults(func=run_revigo)
@@ -36,16 +40,19 @@ def add_revigo_parser(subparsers):
 
 def run_revigo(args):
     """Run the study and write the report; returns the exit code."""
-    from ..studies.revigo import POSTERIOR_EPS, revigo_study, write_revigo_report
+    from ..studies.revigo import G_SENSITIVITY, POSTERIOR_EPS, revigo_study, write_revigo_report
 
     eps = POSTERIOR_EPS if args.eps is None else args.eps
     if not (eps > 0 and eps < 1):
         raise ValueError(f"--eps must lie in (0, 1), got {args.eps}")
+    if args.g_sensitivity and not all(-1.0 < g < 1.0 for g in args.g_sensitivity):
+        raise ValueError(f"--g-sensitivity values must lie in (-1, 1), got {args.g_sensitivity}")
     if args.draws < 10:
         raise ValueError(f"--draws must be >= 10, got {args.draws}")
     progress = None if args.quiet else (lambda message: print(message, file=sys.stderr, flush=True))
     study = revigo_study(args.path, specular=args.specular, progress=progress, posterior=args.posterior,
-                         posterior_eps=eps, n_draws=args.draws, seed=args.seed)
+                         posterior_eps=eps, n_draws=args.draws, seed=args.seed,
+                         g_sensitivity=G_SENSITIVITY if args.g_sensitivity is None else tuple(args.g_sensitivity))
     path = write_revigo_report(study, args.report)
     print(f"wrote {path}: SCE/SCI decision {study.evidence['decision']}; "
           f"{len(study.series)} tint series")

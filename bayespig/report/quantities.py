@@ -13,7 +13,8 @@ Everything here reads an arviz ``InferenceData`` written by :func:`bayespig.infe
   ``D sigma_ext`` matters, so ``sigma_ext`` is in the user's concentration units);
 * convergence diagnostics (bulk ESS and rank-normalised R-hat, arviz) and flagged wavelengths;
 * fit quality: residuals of every measured value in units of its relative error ``eps``
-  (paper eq. 7: ``(x_obs - x_model) / (eps x_model)`` is standard normal at the truth);
+  (paper eq. 7: ``(x_obs - x_model) / (eps x_model)`` is standard normal at the truth), and
+  a posterior predictive check that flags the wavelengths the model cannot reproduce;
 * colour (CIELAB, CIEDE2000 through :mod:`bayespig.colorimetry`) of every measured sample
   and geometry, measured and predicted, and the posterior spread of the predicted colour;
 * predicted colour, with its posterior spread, of films that were not measured (another
@@ -41,6 +42,7 @@ from ..likelihood import FilmTerm, Priors, Problem
 __all__ = [
     "COLOUR_MATCH_DELTA_E",
     "ESS_MIN",
+    "PPC_LEVEL",
     "RHAT_MAX",
     "SPREAD_QUANTILE",
     "FilmDesign",
@@ -56,6 +58,7 @@ __all__ = [
     "measured_colour",
     "parameter_bands",
     "posterior_draws",
+    "posterior_predictive_check",
     "predicted_film_values",
     "priors_from_inference",
     "problem_from_inference",
@@ -73,6 +76,9 @@ RHAT_MAX = 1.01
 ESS_MIN = 400
 #: A colour difference below this (CIEDE2000) is taken as good enough for colour matching.
 COLOUR_MATCH_DELTA_E = 1.0
+#: Posterior predictive p-value below which a wavelength is flagged as a misfit: the model,
+#: at any plausible parameters, cannot reproduce the measured values within their noise.
+PPC_LEVEL = 0.01
 #: Central credible intervals shown everywhere, as (lower, upper) quantiles.
 BANDS = {"50": (0.25, 0.75), "90": (0.05, 0.95)}
 #: Colour spread quantile: ``Delta E00`` of posterior draws from the posterior-mean colour.
@@ -423,6 +429,80 @@ def residuals_in_eps(idata, max_draws=None):
     return {"observed": observed, "predicted_mean": mean, "predicted_q05": q05,
             "predicted_q95": q95, "predicted_draws": predicted, "eps": eps, "z": z,
             "rows": value_table(idata)}
+
+
+def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
+    """Posterior predictive check per wavelength: can the model reproduce the measured values?
+
+    The discrepancy is the chi-square of the noise model (paper eq. 7),
+    ``T(x, theta) = sum_v ((x_v - m_v) / (eps_v m_v))^2`` over the ``n`` values measured at
+    the wavelength, with ``m = m(theta)`` the noise-free prediction of a posterior draw.
+    Replicated data ``x_rep = m (1 + eps xi)`` give ``T(x_rep, theta) ~ chi2(n)`` exactly, so
+    the posterior predictive p-value ``p = P(T(x_rep, theta) >= T(x_obs, theta) | x_obs)``
+    is the posterior mean of ``chi2.sf(T(x_obs, theta), n)`` -- no replicated draws needed
+    (Gelman, Meng & Stern 1996, Statistica Sinica 6, 733). Posterior predictive p-values
+    are conservative (the parameters were fitted to the same data, so ``p`` piles up near
+    0.5 and above for a well-fitting model); a small ``p`` is strong evidence of misfit:
+    no plausible parameters reproduce the values within their noise -- a term the model
+    lacks, a wrong ``eps``, a wrong substrate, or inconsistent samples.
+
+    Where ``eps`` was inferred, each draw uses its own ``eps``; an inferred ``eps`` absorbs
+    misfit (it grows until the values fit), so the check then says little: read the ``eps``
+    posterior instead.
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+        From :func:`bayespig.infer`.
+    level : float
+        Wavelengths with ``p < level`` are flagged.
+    max_draws : int, optional
+        Use at most this many posterior draws (evenly thinned).
+
+    Returns
+    -------
+    dict
+        ``p_value`` (n_wavelengths,); ``chi2`` (n_wavelengths,): ``T`` at the posterior-mean
+        prediction; ``n_values`` (n_wavelengths,); ``flagged``: bool (n_wavelengths,);
+        ``worst``: per wavelength the index of the value with the largest ``|z|``
+        (:func:`residuals_in_eps`), and ``z`` (n_wavelengths, n_values); ``level``.
+
+    Raises
+    ------
+    ValueError
+        When ``level`` is not in (0, 1).
+    """
+    from scipy import stats
+
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must lie in (0, 1), got {level}")
+    observed = np.asarray(idata.observed_data["y"].values, dtype=float)
+    predicted = np.asarray(idata.posterior_predictive["y"].values, dtype=float)
+    predicted = _thin(predicted.reshape((-1,) + predicted.shape[2:]), max_draws)
+    eps = np.broadcast_to(eps_per_value(idata), predicted.shape).copy()
+    constant = getattr(idata, "constant_data", None)
+    inferred = np.ones(observed.shape, dtype=bool)
+    if constant is not None and "eps" in constant:
+        inferred = np.isnan(np.asarray(constant["eps"].values, dtype=float))
+    if inferred.any() and "eps" in idata.posterior:
+        drawn = _thin(posterior_draws(idata, "eps"), max_draws)
+        drawn = np.broadcast_to(drawn.reshape(drawn.shape[:2] + (-1,)), predicted.shape)
+        eps = np.where(inferred, drawn, eps)
+    measured = np.isfinite(observed)
+    n_values = measured.sum(axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z2 = np.where(measured, ((observed - predicted) / (eps * predicted)) ** 2, 0.0)
+    chi2_draws = z2.sum(axis=-1)  # (n_draws, n_wavelengths)
+    p_value = stats.chi2.sf(chi2_draws, np.maximum(n_values, 1)).mean(axis=0)
+    p_value = np.where(n_values > 0, p_value, np.nan)
+    mean = predicted.mean(axis=0)
+    eps_mean = eps_per_value(idata)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = (observed - mean) / (eps_mean * mean)
+    chi2 = np.nansum(np.where(measured, z * z, 0.0), axis=-1)
+    worst = np.argmax(np.where(measured, np.abs(np.nan_to_num(z, nan=np.inf)), -1.0), axis=-1)
+    return {"p_value": p_value, "chi2": chi2, "n_values": n_values, "flagged": p_value < level,
+            "worst": worst, "z": z, "level": float(level)}
 
 
 # ------------------------------------------------------------------------------------------

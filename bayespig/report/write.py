@@ -10,9 +10,11 @@ measurement file, inferred first) and writes into ``out_dir``:
     The Markdown twin with its figures as files.
 ``summary.csv``
     One row per wavelength: posterior mean, sd, median and 5/25/75/95 % quantiles of every
-    parameter, correlation of ``a`` with ``log tau``, point fit, ESS, R-hat, flags.
+    parameter, correlation of ``a`` with ``log tau``, point fit, ESS, R-hat, the posterior
+    predictive p-value of the model check, flags.
 ``summary.json``
-    The same numbers plus colour, fit quality, predicted films, diagnostics and provenance.
+    The same numbers plus colour, fit quality and model check (the wavelengths the model
+    cannot reproduce), predicted films, diagnostics and provenance.
 ``posterior.nc``
     The posterior itself (netCDF), so the report's numbers can be recomputed.
 
@@ -390,6 +392,19 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         f"Diagnostics: {len(flagged)} of {wl.size} wavelengths flagged"
         + (" (see Diagnostics below)." if flagged else " - every wavelength converged "
            f"(R-hat <= {diag['rhat_max']:g}, bulk ESS >= {diag['ess_min']:g}).")))
+    check = q.posterior_predictive_check(idata, max_draws=max_colour_draws)
+    value_rows = q.value_table(idata)
+    misfit = _model_check_rows(wl, check, value_rows)
+    if misfit:
+        blocks.append(doc.paragraph(
+            f"**Model check: the model cannot reproduce the measurements at {len(misfit)} of {wl.size} "
+            f"wavelengths** ({', '.join(m['wavelength_nm_text'] for m in misfit)} nm; posterior predictive "
+            f"p < {check['level']:g}). There the parameters are the best compromise of a model that does "
+            "not fit, not a measurement of the pigment - see Fit quality."))
+    else:
+        blocks.append(doc.paragraph(
+            f"Model check: the model reproduces the measurements within their noise at every wavelength "
+            f"(posterior predictive p >= {check['level']:g})."))
     colour_slot = len(blocks)  # the colour verdict goes here once computed
 
     blocks.append(doc.heading("Optical properties"))
@@ -508,6 +523,24 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     blocks.append(doc.table(["sample", "geometry", "rms residual [eps]", "max |residual| [eps]"],
                             [[f["sample"], f["channel"], _fmt(f["rms_z"]), _fmt(f["max_abs_z"])]
                              for f in fit_rows]))
+    inferred_eps = "eps" in idata.posterior
+    blocks.append(doc.paragraph(
+        "Posterior predictive check per wavelength: the discrepancy is the chi-square of the noise model, "
+        "T = sum over the wavelength's values of ((measured - model) / (eps model))^2; replicated "
+        "measurements make it chi-square with as many degrees of freedom as values, and p is the "
+        "posterior probability that a replicate is at least as discrepant as the measurement (Gelman, "
+        f"Meng & Stern 1996). Below p = {check['level']:g} no plausible parameters reproduce the values "
+        "within their noise: a term the model lacks, a wrong eps or substrate, or samples that are not the "
+        "same paint. The check is conservative (the parameters were fitted to these values)"
+        + ("; eps was inferred and grows to absorb misfit, so read its posterior too." if inferred_eps
+           else ".")))
+    if misfit:
+        blocks.append(doc.table(
+            ["wavelength [nm]", "p", "T / values", "worst value", "its residual [eps]"],
+            [[m["wavelength_nm_text"], f"{m['p_value']:.2g}", f"{m['chi2']:.3g} / {m['n_values']}",
+              f"{m['sample']} {m['channel']}", f"{m['z']:+.3g}"] for m in misfit]))
+    else:
+        blocks.append(doc.paragraph("No wavelength flagged."))
 
     # ---- colour
     _say(progress, "colour")
@@ -605,10 +638,12 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         "parameters": bands, "correlation_a_log_tau": corr, "point_fit": point,
         "truth": truth, "extinction": extinction,
         "diagnostics": {k: diag[k] for k in ("ess", "rhat", "flags", "n_chains", "n_draws", "rhat_max", "ess_min")},
-        "fit_quality": fit_rows, "colour": colour_summary, "priors": priors.describe(),
+        "fit_quality": fit_rows,
+        "model_check": {"level": check["level"], "p_value": check["p_value"], "misfit": misfit},
+        "colour": colour_summary, "priors": priors.describe(),
         "ravine_wavelength_nm": float(wl[r_index]), "provenance": prov,
     }
-    csv_text = _summary_csv(wl, bands, corr, point, diag, extinction)
+    csv_text = _summary_csv(wl, bands, corr, point, diag, extinction, check["p_value"])
     return {"blocks": blocks, "figures": pngs, "summary": _jsonable(summary), "csv": csv_text,
             "title": title}
 
@@ -617,7 +652,19 @@ def _lab(lab):
     return " ".join(f"{v:.2f}" for v in np.asarray(lab).ravel())
 
 
-def _summary_csv(wl, bands, corr, point, diag, extinction):
+def _model_check_rows(wl, check, value_rows):
+    """The wavelengths flagged by the posterior predictive check, with their worst value."""
+    rows = []
+    for i in np.flatnonzero(check["flagged"]):
+        k = int(check["worst"][i])
+        rows.append({"wavelength_nm": float(wl[i]), "wavelength_nm_text": f"{wl[i]:g}",
+                     "p_value": float(check["p_value"][i]), "chi2": float(check["chi2"][i]),
+                     "n_values": int(check["n_values"][i]), "sample": value_rows[k]["sample"],
+                     "channel": value_rows[k]["channel"], "z": float(check["z"][i, k])})
+    return rows
+
+
+def _summary_csv(wl, bands, corr, point, diag, extinction, ppc_p_value):
     columns = {"wavelength_nm": wl}
     for name, b in bands.items():
         for stat in ("mean", "sd", "median", "q05", "q25", "q75", "q95"):
@@ -629,6 +676,7 @@ def _summary_csv(wl, bands, corr, point, diag, extinction):
     columns["corr_a_log_tau"] = corr
     columns["point_a"] = point["a"]
     columns["point_tau"] = point["tau"]
+    columns["ppc_p_value"] = ppc_p_value
     for name in diag["ess"]:
         columns[f"ess_bulk_{name}"] = diag["ess"][name]
         columns[f"rhat_{name}"] = diag["rhat"][name]

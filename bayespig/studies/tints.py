@@ -1,6 +1,6 @@
 """Tint prediction, the colour-matching step: a pigment's ~50/50 tint from masstone, white and 10/90 tint.
 
-Protocol (identical for bayespig's isotropic radiative-transfer model and for two-constant
+Protocol (identical for bayespig's radiative-transfer model and for two-constant
 Kubelka-Munk with Saunderson correction; only the per-film calibration and the forward
 model differ). Every film is measured over a dark and a light card (the paper's method 4).
 
@@ -59,7 +59,7 @@ from .. import kubelka_munk as km
 __all__ = [
     "TINT_MODELS",
     "FilmCalibration",
-    "IsotropicTintModel",
+    "RadiativeTransferTintModel",
     "KubelkaMunkTintModel",
     "ModelErrorRegion",
     "TintPosterior",
@@ -124,27 +124,34 @@ def black_white_pair(measurements):
     return observed, r_s[order], films[order[0]].instrument(measurements.n).channels[0]
 
 
-class IsotropicTintModel:
-    """bayespig's radiative-transfer model as a tint model: ``u = a``, ``E = tau`` (isotropic, ``g = 0``).
+class RadiativeTransferTintModel:
+    """bayespig's radiative-transfer model as a tint model: ``u = a``, ``E = tau``.
 
     Parameters
     ----------
     instrument : str or Instrument
-        The films' instrument (e.g. ``"8d-sce"``); its look-up table is loaded from the cache.
+        The films' instrument (e.g. ``"8d-sce"``); its look-up table is loaded from the cache
+        (built on first use; with a ``g`` axis when ``g != 0``).
     table : LookupTable, optional
-        The instrument's table (isotropic).
+        The instrument's table (isotropic, or with a ``g`` axis covering ``g``).
     settings : FitSettings, optional
         Point-fit settings; default a starting grid twice as fine as the default (the
         default grid can miss the narrow method-4 valley of white-rich films).
+    g : float
+        Henyey-Greenstein parameter of every film [-], fixed (default 0, isotropic). The
+        mixing rule adds scattering coefficients, so a common ``g`` is also the mixture's.
     """
 
-    name = "bayespig"
-
-    def __init__(self, instrument, table=None, settings=None):
+    def __init__(self, instrument, table=None, settings=None, g=0.0):
         from ..fit import FitSettings
         from ..table import load_table
 
-        self.table = table if table is not None else load_table(instrument, progress=False)
+        self.g = float(g)
+        self.name = "bayespig" if self.g == 0.0 else f"bayespig (g = {self.g:g})"
+        self.table = table if table is not None else load_table(
+            instrument, g="isotropic" if self.g == 0.0 else "free", progress=False)
+        if self.g != 0.0 and not self.table.free_g:
+            raise ValueError(f"g = {self.g:g} needs a table with a g axis (load_table(..., g='free'))")
         self.settings = settings or FitSettings(n_grid_a=64, n_grid_tau=96)
         self.tau_max = float(self.table.settings.tau_nodes[-1])
 
@@ -178,7 +185,8 @@ class IsotropicTintModel:
             for rank, k in enumerate(np.argsort([f.r_s.mean() for f in films])):
                 films[k] = replace(films[k], r_s=r_s[rank])
             problem = replace(problem, films=tuple(films))
-        result = fit_problem(problem, settings=self.settings, warn=False)
+        tables = {film.instrument: self.table for film in problem.films}
+        result = fit_problem(problem, g=self.g, tables=tables, settings=self.settings, warn=False)
         a, tau = result.a.copy(), result.tau[:, 0].copy()
 
         def cost(a_value, tau_value, i):
@@ -196,7 +204,8 @@ class IsotropicTintModel:
             for j in (i - 1, i + 1):
                 if 0 <= j < a.size:
                     start = (float(np.clip(a[j], 1e-4, 1.0)), float(min(tau[j], 0.5 * self.tau_max)))
-                    local = fit_problem(row, settings=FitSettings(start=start), warn=False)
+                    local = fit_problem(row, g=self.g, tables=tables, settings=FitSettings(start=start),
+                                        warn=False)
                     best = min(best, (cost(local.a[0], local.tau[0, 0], i), local.a[0], local.tau[0, 0]))
             _, a[i], tau[i] = best
         tau = np.minimum(tau, self.tau_max)
@@ -206,7 +215,7 @@ class IsotropicTintModel:
     def reflectance(self, intensive, extensive, r_s):
         """Predicted reflectance [1] of films with ``a = intensive``, ``tau = extensive`` over ``r_s``."""
         tau = np.where(np.asarray(extensive) > self.tau_max, np.inf, extensive)
-        return self.table(a=np.clip(intensive, 0.0, 1.0), tau=tau, r_s=r_s)[..., 0]
+        return self.table(a=np.clip(intensive, 0.0, 1.0), tau=tau, g=self.g, r_s=r_s)[..., 0]
 
 
 class KubelkaMunkTintModel:
@@ -365,7 +374,7 @@ def predict_tint(model, *, masstone, white, tint_b, tint_c, concentrations_b, co
 
     Parameters
     ----------
-    model : IsotropicTintModel or KubelkaMunkTintModel
+    model : RadiativeTransferTintModel or KubelkaMunkTintModel
     masstone, white, tint_b, tint_c : MeasurementSet
         Each one film over a dark and a light card (same wavelengths).
     concentrations_b, concentrations_c : tuple of float
@@ -501,7 +510,7 @@ def tint_posterior_predictive(model, posteriors, *, tint_c, concentrations_b, co
 
     Parameters
     ----------
-    model : IsotropicTintModel
+    model : RadiativeTransferTintModel
     posteriors : dict
         ``"masstone"``, ``"white"``, ``"tint_b"`` -> arviz.InferenceData with posterior ``a`` and
         ``tau`` over (chain, draw, wavelength).

@@ -156,3 +156,53 @@ def test_ravine_peaks_at_the_posterior(demo_idata):
     da, dlog = rv.a[1] - rv.a[0], np.log(rv.tau[1] / rv.tau[0])
     assert np.quantile(a, 0.005) - da <= rv.a[i] <= np.quantile(a, 0.995) + da
     assert np.log(np.quantile(tau, 0.005)) - dlog <= np.log(rv.tau[j]) <= np.log(np.quantile(tau, 0.995)) + dlog
+
+
+# ------------------------------------------------------------------------------------------
+# posterior predictive check
+
+PPC_MONTE_CARLO = 20000  # replicates per draw: the Monte Carlo p has sd <= 0.0035
+PPC_MC_TOL = 0.02  # ~5 sd of that Monte Carlo error, on p-values of ~0.01-0.9
+
+
+def _with_observed(idata, observed):
+    """A copy of ``idata`` whose observed data are replaced."""
+    copy = idata.copy()
+    copy.observed_data["y"].values[...] = observed
+    return copy
+
+
+def test_posterior_predictive_p_value_matches_replicated_data(demo_idata):
+    """p against replicates x_rep = m (1 + eps xi) drawn from a seeded generator (eq. 7)."""
+    check = q.posterior_predictive_check(demo_idata, max_draws=8)
+    predicted = q._thin(np.asarray(demo_idata.posterior_predictive["y"].values, dtype=float)
+                        .reshape((-1,) + demo_idata.posterior_predictive["y"].shape[2:]), 8)
+    observed = np.asarray(demo_idata.observed_data["y"].values, dtype=float)
+    eps = q.eps_per_value(demo_idata)
+    rng = np.random.default_rng(11)
+    p_mc = np.empty(observed.shape[0])
+    for i in range(observed.shape[0]):
+        m = predicted[:, i]  # (draws, values)
+        t_obs = (((observed[i] - m) / (eps[i] * m)) ** 2).sum(axis=-1)
+        xi = rng.standard_normal((PPC_MONTE_CARLO,) + m.shape)
+        t_rep = (xi ** 2).sum(axis=-1)  # ((m (1 + eps xi) - m) / (eps m))^2 = xi^2
+        p_mc[i] = (t_rep >= t_obs).mean()
+    np.testing.assert_allclose(check["p_value"], p_mc, atol=PPC_MC_TOL)
+    assert check["n_values"].min() == observed.shape[1]
+
+
+def test_posterior_predictive_check_passes_the_model_and_flags_a_corrupted_band(demo_idata):
+    """Simulated from the model: nothing flagged; one value off by 10 eps: exactly that band flagged."""
+    check = q.posterior_predictive_check(demo_idata)
+    assert not check["flagged"].any(), check["p_value"]
+    assert np.median(check["p_value"]) > 0.2  # conservative: p piles up around 0.5 for a fitting model
+    observed = np.asarray(demo_idata.observed_data["y"].values, dtype=float).copy()
+    eps = q.eps_per_value(demo_idata)
+    band, value = 2, 3
+    observed[band, value] *= 1.0 + 10.0 * eps[band, value]
+    corrupted = q.posterior_predictive_check(_with_observed(demo_idata, observed))
+    assert np.flatnonzero(corrupted["flagged"]).tolist() == [band]
+    assert corrupted["worst"][band] == value
+    assert corrupted["z"][band, value] > 8.0
+    with pytest.raises(ValueError, match="level"):
+        q.posterior_predictive_check(demo_idata, level=1.5)

@@ -135,3 +135,23 @@ def test_method1_with_inferred_eps(tmp_path):
     assert {"1 x tau on black", "1 x tau on white"} <= films
     assert any(p["measured"] for p in summary["colour"]["predicted_films"])  # opaque was measured
     assert (tmp_path / "m1" / "figures" / "corner_580nm.png").is_file()
+
+
+def test_report_shows_where_the_model_cannot_reproduce_the_measurements(demo_idata, tmp_path):
+    """A posterior whose observed value at one band is off by 10 eps: named at the top and in the summary."""
+    from bayespig.report import quantities as q
+
+    observed = np.asarray(demo_idata.observed_data["y"].values, dtype=float).copy()
+    band = 1
+    observed[band, 0] *= 1.0 + 10.0 * q.eps_per_value(demo_idata)[band, 0]
+    corrupted = demo_idata.copy()
+    corrupted.observed_data["y"].values[...] = observed
+    result = write_report(corrupted, tmp_path / "misfit", save_posterior=False, corner_wavelengths=())
+    wl = q.wavelengths(demo_idata)
+    misfit = result.summary["model_check"]["misfit"]
+    assert [m["wavelength_nm"] for m in misfit] == [wl[band]]
+    markdown = (tmp_path / "misfit" / "report.md").read_text()
+    glance = markdown.split("## At a glance")[1].split("\n## ")[0]
+    assert f"cannot reproduce the measurements at 1 of {wl.size} wavelengths** ({wl[band]:g} nm" in glance
+    csv_header = (tmp_path / "misfit" / "summary.csv").read_text().splitlines()[0]
+    assert "ppc_p_value" in csv_header.split(",")

@@ -127,6 +127,37 @@ def test_report_with_posteriors_states_both_region_coverages():
                 in text)
 
 
+def test_report_states_the_model_checks_and_the_phase_function_medians():
+    """Per-film posterior checks (counts, flagged bands, posterior at 550 nm) and the g medians."""
+    from bayespig.studies.revigo import FilmCheck, TintSeries
+
+    wl = np.array([400.0, 550.0, 700.0])
+    fits = {m: {"01A": _fit("01A", m, [0.0, 0.02, 0.0], inverted=True), "07A": _fit("07A", m, [0.0] * 3)}
+            for m in ("excluded", "included")}
+    checks = {"01A": FilmCheck("01A", wl, np.array([0.4, 0.003, 0.5]), np.array([False, True, False]),
+                               (0.5, 0.49, 0.51), (2.4, 2.3, 2.5)),
+              "07A": FilmCheck("07A", wl, np.full(3, 0.5), np.zeros(3, bool), (0.001, 0.0, 0.002),
+                               (100.0, 30.0, 127.0))}
+    series = [TintSeries(f"0{i}", "Pigment", f"0{i}A", "07A", f"0{i}B", f"0{i}C", (0.1, 0.9), (0.5, 0.5))
+              for i in range(1, 4)]
+    tints = {}
+    for s, iso, g3 in zip(series, ([1, 2], [2, 4], [3, 6]), ([0.5, 2], [2, 5], [4, 6])):
+        tints[(s.series, "bayespig")] = _prediction("bayespig", iso)
+        tints[(s.series, "bayespig (g = 0.3)")] = _prediction("bayespig (g = 0.3)", g3)
+        tints[(s.series, "kubelka-munk")] = _prediction("kubelka-munk", [1, 1])
+    study = RevigoStudy(fits, specular_evidence(fits), "excluded", series, tints,
+                        {"specular_requested": "auto", "kubelka_munk": {"k1": 0.034, "k2": 0.56},
+                         "posterior": {"eps": 0.01, "n_draws": 10, "seed": 0}}, checks=checks)
+    text = revigo_report(study)
+    assert "**Flagged: 1 of 6 bands, in 1 of 2 films (01A)**; inverted bands among the flagged: 1." in text
+    assert "| 550 | 0.5 [0.49, 0.51] | 2.4 [2.3, 2.5] |" in text
+    assert "| none | 0.001 [0, 0.002] | 100 [30, 127] |" in text
+    # medians by hand: isotropic (2, 4), g = 0.3 (2, 5); g = 0.3 better on 1 (black) and 0 (white) series
+    assert "| bayespig | 2.00 | 4.00 | — |" in text
+    assert "| bayespig (g = 0.3) | 2.00 | 5.00 | 1, 0 of 3 |" in text
+    assert "move by up to 1.00 ΔE00" in text
+
+
 def test_cli_reports_a_missing_folder(tmp_path):
     parser = argparse.ArgumentParser()
     add_revigo_parser(parser.add_subparsers(dest="command"))
@@ -137,12 +168,15 @@ def test_cli_reports_a_missing_folder(tmp_path):
     args = parser.parse_args(["revigo", str(tmp_path), "--eps", "0", "--quiet"])
     with pytest.raises(ValueError, match="--eps"):
         run_revigo(args)
+    args = parser.parse_args(["revigo", str(tmp_path), "--g-sensitivity", "0.3", "1.2", "--quiet"])
+    with pytest.raises(ValueError, match="--g-sensitivity"):
+        run_revigo(args)
 
 
 @needs_revigo
 @pytest.mark.slow
 def test_revigo_study_one_series(tmp_path):
-    study = revigo_study(REVIGO, films=["06A", "06B", "06C", "07A", "11A"], series=["06"])
+    study = revigo_study(REVIGO, films=["06A", "06B", "06C", "07A", "11A"], series=["06"], g_sensitivity=())
     assert study.evidence["decision"] == "excluded"  # 11A is darker than r_F(8°)
     p, k = study.tints[("06", "bayespig")], study.tints[("06", "kubelka-munk")]
     # vermilion tints are predicted well by both models (report: ΔE00 < 0.5)

@@ -8,7 +8,7 @@ from bayespig.data import simulate
 from bayespig.data.simulate import FilmSpec
 from bayespig.physics.mixtures import concentrations_from_mass_fractions, mixture_properties
 from bayespig.studies.tints import (
-    IsotropicTintModel,
+    RadiativeTransferTintModel,
     KubelkaMunkTintModel,
     mixture_weight_ratio,
     predict_tint,
@@ -77,7 +77,7 @@ def test_weight_ratio_inverts_the_mixing_rule():
 def test_bayespig_protocol_recovers_simulated_tint(table):
     intensive, extensive, D_B, D_C = _truth_bayespig()
     films = _films(table, intensive, extensive)
-    model = IsotropicTintModel("8d-sce", table=table)
+    model = RadiativeTransferTintModel("8d-sce", table=table)
     p = predict_tint(model, masstone=films["A"], white=films["W"], tint_b=films["B"], tint_c=films["C"],
                      concentrations_b=tuple(D_B), concentrations_c=tuple(D_C))
     assert p.thickness == pytest.approx(THICKNESS["C"] / THICKNESS["W"], rel=THICKNESS_RTOL)
@@ -112,6 +112,11 @@ def test_kubelka_munk_protocol_recovers_simulated_tint():
     assert p.thickness == pytest.approx(THICKNESS["C"], rel=1e-5)
     np.testing.assert_allclose(p.predicted, p.measured, rtol=1e-6)
     np.testing.assert_allclose(p.intensive, intensive["C"], rtol=1e-8)
+
+
+def test_anisotropic_tint_model_needs_a_g_table(table):
+    with pytest.raises(ValueError, match="g axis"):
+        RadiativeTransferTintModel("8d-sce", table=table, g=0.5)
 
 
 def test_protocol_rejects_bad_concentrations(table):
@@ -208,7 +213,7 @@ def test_posterior_predictive_region_contains_the_simulated_tint(table):
         return az.from_dict(posterior={"a": np.clip(a, 0.0, 1.0), "tau": tau})
 
     posteriors = {"masstone": posterior("A"), "white": posterior("W"), "tint_b": posterior("B")}
-    model = IsotropicTintModel("8d-sce", table=table)
+    model = RadiativeTransferTintModel("8d-sce", table=table)
     result = tint_posterior_predictive(model, posteriors, tint_c=films["C"], concentrations_b=tuple(D_B),
                                        concentrations_c=tuple(D_C), n_draws=60, seed=1)
     assert result.lab_draws.shape == (60, 2, 3)
