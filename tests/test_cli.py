@@ -84,3 +84,24 @@ def test_revigo_command_on_a_missing_folder_exits_2(tmp_path, capsys):
     assert main(["revigo", str(tmp_path / "nowhere"), "--report", str(tmp_path / "r.md"), "--quiet"]) == 2
     assert "nowhere" in capsys.readouterr().err
     assert not (tmp_path / "r.md").exists()
+
+
+def test_infer_one_film_of_a_spectral_table_and_warn_where_the_model_cannot_fit(tmp_path, capsys):
+    """``--film`` picks a film of a Revigo-style table; a band measured brighter over the black card
+    than over the white (no layer model can do that) is named as a misfit, the other band is not."""
+    import arviz as az
+
+    rows = [["X_b", 5, 5], ["X_w", 80, 85], ["X_ob", 20, 30], ["X_ow", 40, 50],
+            ["Z_b", 5, 5], ["Z_w", 80, 85], ["Z_ob", 45, 30], ["Z_ow", 40, 50]]
+    table = tmp_path / "table.txt"
+    table.write_text("Name\t400\t500\n" + "\n".join("\t".join(map(str, r)) for r in rows) + "\n")
+    out = tmp_path / "posterior"
+    assert main(["infer", str(table), "--film", "Z", "--method", "4", "--eps", "0.01", "--out", str(out),
+                 "--max-steps", "400", "--no-progress"]) == 0
+    captured = capsys.readouterr()
+    idata = az.from_netcdf(out / "posterior.nc")
+    assert set(np.asarray(idata.observed_data["sample"].values).ravel()) == {"Z_ob", "Z_ow"}
+    assert "cannot reproduce the measurements at 1 wavelength(s)" in captured.err
+    assert "400 nm (p = " in captured.err and "500 nm" not in captured.err.split("cannot reproduce")[1]
+    assert main(["infer", str(table), "--out", str(tmp_path / "none"), "--no-progress"]) == 2
+    assert "holds 2 films" in capsys.readouterr().err

@@ -1,13 +1,15 @@
-"""Command-line values shared by the sub-commands: number lists and method names."""
+"""Command-line values shared by the sub-commands: number lists, method names, the film of a table."""
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["METHOD_NAMES", "parse_methods", "parse_numbers"]
+__all__ = ["INFER_METHODS", "METHOD_NAMES", "add_film_argument", "parse_methods", "parse_numbers", "read_film"]
 
 #: ``--method 1,4`` -> the paper's method names.
 METHOD_NAMES = {"1": "method1", "2": "method2", "3": "method3", "4": "method4"}
+#: ``--method`` of ``infer`` and ``report``: a method, ``auto`` or ``general``.
+INFER_METHODS = {**METHOD_NAMES, "auto": "auto", "general": "general"}
 
 
 def parse_numbers(text, flag, *, positive=False):
@@ -41,3 +43,18 @@ def parse_methods(text, flag="--method"):
     if not names:
         raise ValueError(f"{flag}: no method given")
     return tuple(names)
+
+
+def add_film_argument(parser):
+    """``--film ID``: which film of a spectral table holding several (Revigo) to use."""
+    parser.add_argument("--film", default=None,
+                        help="for a spectral table of several films (Revigo): the film id, e.g. 04B")
+
+
+def read_film(path, film):
+    """The measurement file ``path`` as given (``film`` None) or the set of one film of a table."""
+    if film is None:
+        return path
+    from ..data import read_measurements
+
+    return read_measurements(path, film=film)

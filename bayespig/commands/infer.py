@@ -9,11 +9,11 @@ import warnings
 import numpy as np
 
 from .._atomic import atomic_path
+from ._arguments import INFER_METHODS as _METHODS
+from ._arguments import add_film_argument, read_film
 
 __all__ = ["add_infer_parser", "run_infer"]
 
-_METHODS = {"1": "method1", "2": "method2", "3": "method3", "4": "method4", "auto": "auto",
-            "general": "general"}
 
 
 def add_infer_parser(subparsers):
@@ -31,6 +31,7 @@ def add_infer_parser(subparsers):
                         help="the paper's method whose samples enter the likelihood (default auto: "
                              "the most robust one the samples support)")
     parser.add_argument("--out", required=True, help="output directory")
+    add_film_argument(parser)
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--g", default="isotropic", choices=("isotropic", "free"),
                         help="Henyey-Greenstein g fixed at 0 (default) or a parameter")
@@ -68,6 +69,7 @@ def run_infer(args):
         save_inference,
         summarize,
     )
+    from ..report.quantities import posterior_predictive_check
 
     eps = _eps_argument(args.eps)
     overrides = {name: value for name, value in (("n_walkers", args.walkers),
@@ -78,7 +80,7 @@ def run_infer(args):
         raise ValueError(f"{args.measurements}: no such file")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ConvergenceWarning)
-        idata = infer(args.measurements, method=_METHODS[args.method], seed=args.seed, g=args.g,
+        idata = infer(read_film(args.measurements, args.film), method=_METHODS[args.method], seed=args.seed, g=args.g,
                       eps=eps, progress=not args.no_progress, settings=settings)
         flagged = diagnose(idata, warn=False)
     for warning in caught:
@@ -97,6 +99,13 @@ def run_infer(args):
     print(summary[columns].to_string(float_format=lambda v: f"{v:.4g}"))
     print(f"wrote {posterior_path} and {summary_path}")
     sys.stdout.flush()
+    check = posterior_predictive_check(idata)
+    misfit = np.flatnonzero(check["flagged"])
+    if misfit.size:
+        wl = idata.posterior["wavelength"].values
+        print(f"bayespig: warning: the model cannot reproduce the measurements at {misfit.size} "
+              f"wavelength(s) (posterior predictive p < {check['level']:g}): "
+              + ", ".join(f"{wl[i]:g} nm (p = {check['p_value'][i]:.2g})" for i in misfit), file=sys.stderr)
     if flagged:
         print(f"bayespig: warning: {len(flagged)} wavelength(s) not converged (R-hat > 1.01 or "
               "ESS < 400); do not trust them:", file=sys.stderr)

@@ -6,10 +6,11 @@ import os
 import sys
 import warnings
 
+from ._arguments import INFER_METHODS as _METHODS
+from ._arguments import add_film_argument, read_film
+
 __all__ = ["add_demo_parser", "add_report_parser", "run_demo", "run_report"]
 
-_METHODS = {"1": "method1", "2": "method2", "3": "method3", "4": "method4", "auto": "auto",
-            "general": "general"}
 
 
 def add_report_parser(subparsers):
@@ -29,8 +30,7 @@ def add_report_parser(subparsers):
     parser.add_argument("--out", required=True, help="output directory")
     parser.add_argument("--measurements", default=None,
                         help="the measurement file of a posterior (thickness, concentration, truth)")
-    parser.add_argument("--film", default=None,
-                        help="when inferring from a spectral table of several films (Revigo): the film id")
+    add_film_argument(parser)
     parser.add_argument("--method", default="auto", choices=sorted(_METHODS),
                         help="when inferring: the paper's method (default auto)")
     parser.add_argument("--seed", type=int, default=0, help="when inferring: random seed (default 0)")
@@ -61,11 +61,7 @@ def run_report(args):
     if not os.path.exists(args.source):
         raise ValueError(f"{args.source}: no such file")
     infer_kwargs = {"method": _METHODS[args.method], "seed": args.seed, "g": args.g}
-    source = args.source
-    if args.film is not None:
-        from ..data import read_measurements
-
-        source = read_measurements(source, film=args.film)
+    source = read_film(args.source, args.film)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = write_report(source, args.out, measurements=args.measurements,

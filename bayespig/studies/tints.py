@@ -59,9 +59,9 @@ from .. import kubelka_munk as km
 __all__ = [
     "TINT_MODELS",
     "FilmCalibration",
-    "RadiativeTransferTintModel",
     "KubelkaMunkTintModel",
     "ModelErrorRegion",
+    "RadiativeTransferTintModel",
     "TintPosterior",
     "TintPrediction",
     "black_white_pair",

@@ -8,8 +8,8 @@ from bayespig.data import simulate
 from bayespig.data.simulate import FilmSpec
 from bayespig.physics.mixtures import concentrations_from_mass_fractions, mixture_properties
 from bayespig.studies.tints import (
-    RadiativeTransferTintModel,
     KubelkaMunkTintModel,
+    RadiativeTransferTintModel,
     mixture_weight_ratio,
     predict_tint,
 )
