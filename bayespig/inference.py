@@ -63,7 +63,9 @@ of the measured values at one wavelength, films concatenated in problem order), 
     ``a`` (chain, draw, wavelength); ``tau`` (chain, draw, wavelength): ``tau`` of the first
     film group (the thin film; for method 1 the film on glass, from its transmittance), absent
     only when every film is opaque; ``tau_group`` (chain, draw, wavelength, group) when there
-    is more than one group; ``g`` when ``g="free"``; ``eps`` when inferred.
+    is more than one group; ``g`` when ``g="free"``; ``eps`` when inferred; ``r_s_factor``
+    (chain, draw, card) with ``substrate_sd`` (one run over all wavelengths: the draws of
+    different wavelengths are then joint draws, not independent runs).
 ``posterior_predictive``
     ``y`` (chain, draw, wavelength, value): the noise-free model prediction of every measured
     value; ``y_rep`` with the noise of eq. (7) added when ``settings.predictive_noise``
@@ -593,7 +595,7 @@ def _run_verdict(chain, log_prob, settings, steps):
             "n_burn_in": burn, "thin": thin, "max_steps_reached": capped}
 
 
-def _sample_stack(stacked, singles, starts, settings, seed_sequences):
+def _sample_stack(stacked, singles, starts, settings, seed_sequences, moves=None, start_walkers=None):
     """emcee run of a stack of wavelengths in one sampler; one run record per wavelength.
 
     Every wavelength has ``n_ensembles`` ensembles of ``n_walkers`` walkers of its own
@@ -616,6 +618,13 @@ def _sample_stack(stacked, singles, starts, settings, seed_sequences):
     seed_sequences : list of numpy.random.SeedSequence
         One per wavelength (its start jitter, stragglers, predictive noise); the first one's
         also seeds emcee's random state of the stack.
+    moves : list, optional
+        ``(move, weight)`` pairs replacing the settings' mixture (a stack of one member; e.g.
+        :class:`bayespig.substrate_nuisance.ConditionalBlocksMove`, which needs fewer walkers
+        than ``2 n_dim``).
+    start_walkers : numpy.ndarray, optional
+        Every walker's start (n_stack * n_ensembles * n_walkers, n_dim) instead of a ball
+        around ``starts``.
 
     Returns
     -------
@@ -624,27 +633,31 @@ def _sample_stack(stacked, singles, starts, settings, seed_sequences):
     import emcee
 
     n_stack, n_dim = len(singles), stacked.n_dim
-    if settings.n_walkers < 2 * n_dim or settings.n_walkers % 2 or settings.n_walkers < 6:
+    if settings.n_walkers < 2 * n_dim * (moves is None) or settings.n_walkers % 2 or settings.n_walkers < 6:
         raise ValueError(f"InferenceSettings.n_walkers must be even, >= 6 and >= 2 * n_dim = "
                          f"{2 * n_dim} for parameters {stacked.parameter_names}")
     n_chains = settings.n_ensembles
     per_member = n_chains * settings.n_walkers
     children = [seq.spawn(4) for seq in seed_sequences]  # jitter, emcee, predictive, stragglers
-    start = np.concatenate([
-        _initial_walkers(single, theta0, per_member, settings.jitter, np.random.default_rng(child[0]))
-        for single, theta0, child in zip(singles, starts, children)])
+    if start_walkers is None:
+        start = np.concatenate([
+            _initial_walkers(single, theta0, per_member, settings.jitter, np.random.default_rng(child[0]))
+            for single, theta0, child in zip(singles, starts, children)])
+    else:
+        start = np.array(start_walkers, dtype=float)
     member_of_walker = np.repeat(np.arange(n_stack), per_member)
 
     def log_prob_of_all(coords):  # emcee's interface: every walker of the stack
         return stacked(coords, member=member_of_walker)
 
-    moves = _moves(settings, n_dim, n_stack, stacked)
+    custom = moves is not None  # may have fewer walkers than dimensions (emcee's start check does not apply)
+    moves = _moves(settings, n_dim, n_stack, stacked) if moves is None else moves
     sampler = emcee.EnsembleSampler(n_stack * per_member, n_dim, log_prob_of_all, vectorize=True, moves=moves)
     sampler.random_state = np.random.RandomState(np.random.MT19937(children[0][1])).get_state()
 
     # pre-burn: let the ensembles spread out, then move stragglers (walkers stranded far below
     # their ensemble's log-posterior, which ensemble moves cannot bring back), and start afresh
-    state = sampler.run_mcmc(start, settings.pre_burn_steps, progress=False)
+    state = sampler.run_mcmc(start, settings.pre_burn_steps, progress=False, skip_initial_state_check=custom)
     for k, (single, child) in enumerate(zip(singles, children)):
         block = slice(k * per_member, (k + 1) * per_member)
         _replace_stragglers(state.coords[block], state.log_prob[block], single, n_chains,
@@ -829,13 +842,90 @@ def _versions():
             "arviz_version": arviz.__version__}
 
 
+#: Share of whole-vector DE moves among the block moves of the joint run with substrate factors:
+#: they follow correlations between the blocks that the residual coordinates leave.
+JOINT_DE_WEIGHT = 0.2
+
+
+def _sample_with_card_factors(problem, model, priors, eps, settings, seed, substrate, executor, progress):
+    """Joint run over all wavelengths with one ``r_s`` factor per card (:mod:`bayespig.substrate_nuisance`).
+
+    Returns the per-wavelength result records of the per-wavelength path, the factor draws
+    (chain, draw, card), their autocorrelation times, the settings used (walkers raised to
+    what the joint vector needs) and the joint log-posterior.
+    """
+    from .substrate_nuisance import CardFactorLogPosterior, ConditionalBlocksMove
+
+    cards, card_index, relative_sd = substrate
+    G = len(problem.groups)
+    # a pilot: every wavelength's posterior at the cards' stated albedo (f = 1), the usual way
+    pilot_seed, joint_seed, start_seed = np.random.SeedSequence(int(seed)).spawn(3)
+    pilot = infer_problem(problem, seed=int(pilot_seed.generate_state(1)[0]), g="isotropic", eps=eps,
+                          executor=executor, progress=progress, priors=priors, settings=settings,
+                          tables=model.tables)
+    a_pilot = np.asarray(pilot.posterior["a"].values, dtype=float)
+    tau_pilot = (np.asarray(pilot.posterior["tau_group"].values, dtype=float) if "tau_group" in pilot.posterior
+                 else np.asarray(pilot.posterior["tau"].values, dtype=float)[..., None])
+    draws = np.concatenate([a_pilot[..., None], np.log(tau_pilot)], axis=-1)  # (chain, draw, wl, 1 + G)
+    draws = draws.reshape(-1, *draws.shape[2:])
+    theta_hat = np.median(draws, axis=0)
+    joint = CardFactorLogPosterior(model, card_index, theta_hat, priors, eps, relative_sd, cards)
+    n_wl = joint.n_wavelengths
+    # blocks of 1 + G (a wavelength) and n_cards parameters: DE needs a few walkers per dimension
+    n_walkers = max(settings.n_walkers, 4 * max(1 + G, joint.n_cards), 6)
+    used = dataclasses.replace(settings, n_walkers=n_walkers + n_walkers % 2)
+    # walkers start on the pilot's draws (independently per wavelength) with f ~ 1
+    rng = np.random.default_rng(start_seed)
+    n_total = used.n_ensembles * used.n_walkers
+    picked = draws[rng.integers(0, draws.shape[0], size=(n_total, n_wl)), np.arange(n_wl)]  # (n, wl, 1 + G)
+    residual = np.concatenate([picked[..., 0], picked[..., 1:].reshape(n_total, -1)], axis=1) - joint.theta_hat
+    start = np.concatenate([residual, rng.normal(0.0, 0.01 * relative_sd, (n_total, joint.n_cards))], axis=1)
+    start[:, joint.factor_slice] = np.clip(start[:, joint.factor_slice], joint.log_f_lower, joint.log_f_upper)
+    run = _sample_stack(joint, [joint], np.zeros((1, joint.n_dim)), used, [joint_seed],
+                        moves=[(ConditionalBlocksMove(joint, used.n_ensembles), 1.0 - JOINT_DE_WEIGHT),
+                               (IndependentEnsemblesMove("de", used.n_ensembles), JOINT_DE_WEIGHT)],
+                        start_walkers=start)[0]
+    theta = run.pop("theta")
+    n_chains, n_draws, n_dim = theta.shape
+    flat = theta.reshape(-1, n_dim)
+    a, tau, factors = joint.unpack(flat)
+    model_values = joint.predict(flat)  # (N, n_wl, n_values)
+    pointwise = joint.log_likelihood(flat)
+    noisy = None
+    if used.predictive_noise:
+        rng = np.random.default_rng(run["predictive_seed"])
+        noisy = model_values * (1.0 + joint.eps * rng.standard_normal(model_values.shape))
+    shape = (n_chains, n_draws)
+    autocorr = run["autocorr_time"]
+    results = []
+    for i in range(n_wl):
+        record = {
+            "a": a[:, i].reshape(shape),
+            "tau": tau[:, i].reshape(shape + (G,)),
+            "y": model_values[:, i].reshape(shape + (-1,)),
+            "log_likelihood": pointwise[:, i].reshape(shape + (-1,)),
+            "lp": pointwise[:, i].sum(axis=-1).reshape(shape),
+            "acceptance_rate": run["acceptance_rate"],
+            "autocorr_time": np.concatenate([[autocorr[i]], autocorr[n_wl + i * G:n_wl + (i + 1) * G]]),
+            "n_steps": run["n_steps"], "n_burn_in": run["n_burn_in"], "thin": run["thin"],
+            "max_steps_reached": run["max_steps_reached"],
+        }
+        if noisy is not None:
+            record["y_rep"] = noisy[:, i].reshape(shape + (-1,))
+        results.append(record)
+    factor_draws = factors.reshape(shape + (joint.n_cards,))
+    return results, factor_draws, autocorr[joint.factor_slice], used, joint
+
+
 def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, progress=True,
-                  priors=None, settings=None, tables=None):
+                  priors=None, settings=None, tables=None, substrate=None):
     """Posterior samples of a :class:`~bayespig.likelihood.Problem` at every wavelength.
 
     Parameters as :func:`infer`, except ``eps``: a positive number (known, for films without
     their own) or None (inferred); ``tables`` optionally passes look-up tables
-    (instrument -> table) for the point fit and serial runs.
+    (instrument -> table) for the point fit and serial runs; ``substrate``: ``(cards,
+    card_index, relative_sd)`` to sample one ``r_s`` factor per card jointly over all
+    wavelengths (:func:`bayespig.substrate_nuisance.card_indices` gives the first two).
 
     Returns
     -------
@@ -863,25 +953,31 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     log_post0 = LogPosterior(model, 0, priors, g=g, eps=eps)
     n_wl = problem.n_wavelengths
     starts, fit = _point_starts(problem, g, model.tables, priors, log_post0, n_wl)
-    seeds = np.random.SeedSequence(int(seed)).spawn(n_wl)
-
-    # the stacks of wavelengths sampled together depend on the settings only (never on the
-    # executor), so the samples do not depend on how the tasks are run
-    per_run = settings.wavelengths_per_run
-    tasks = [_Task(problem, g, eps, priors, settings, tuple(range(i, min(i + per_run, n_wl))),
-                   starts[i:i + per_run], tuple(seeds[i:i + per_run]))
-             for i in range(0, n_wl, per_run)]
-    own_pool = None
-    if executor is None and len(tasks) > 1:
-        own_pool = executor = ProcessPoolExecutor(max_workers=min(2, len(tasks), os.cpu_count() or 1))
-    if executor is None:
-        _WORKER_TABLES.setdefault((g, problem.n), {}).update(model.tables)
-    try:
-        chunks = _map_tasks(tasks, executor, progress)
-    finally:
-        if own_pool is not None:
-            own_pool.shutdown()
-    results = [r for chunk in chunks for r in chunk]
+    joint = None
+    if substrate is not None:
+        if g != "isotropic" or eps is None:
+            raise ValueError("substrate factors need g='isotropic' and a known eps")
+        results, factor_draws, factor_autocorr, settings, joint = _sample_with_card_factors(
+            problem, model, priors, eps, settings, seed, substrate, executor, progress)
+    else:
+        seeds = np.random.SeedSequence(int(seed)).spawn(n_wl)
+        # the stacks of wavelengths sampled together depend on the settings only (never on the
+        # executor), so the samples do not depend on how the tasks are run
+        per_run = settings.wavelengths_per_run
+        tasks = [_Task(problem, g, eps, priors, settings, tuple(range(i, min(i + per_run, n_wl))),
+                       starts[i:i + per_run], tuple(seeds[i:i + per_run]))
+                 for i in range(0, n_wl, per_run)]
+        own_pool = None
+        if executor is None and len(tasks) > 1:
+            own_pool = executor = ProcessPoolExecutor(max_workers=min(2, len(tasks), os.cpu_count() or 1))
+        if executor is None:
+            _WORKER_TABLES.setdefault((g, problem.n), {}).update(model.tables)
+        try:
+            chunks = _map_tasks(tasks, executor, progress)
+        finally:
+            if own_pool is not None:
+                own_pool.shutdown()
+        results = [r for chunk in chunks for r in chunk]
 
     def stack(name, axis=2):
         return np.stack([r[name] for r in results], axis=axis)
@@ -909,6 +1005,9 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     post_coords = dict(coords)
     if len(groups) > 1:
         post_coords["group"] = groups
+    if joint is not None:
+        posterior["r_s_factor"] = (("chain", "draw", "card"), factor_draws)
+        post_coords["card"] = list(joint.cards)
     # per-draw predictions and pointwise log-likelihoods are most of the file (two values per
     # measured value and draw): single precision (7 digits) is far finer than the noise they
     # describe and halves it
@@ -925,6 +1024,8 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
         "thinning": (("wavelength",), np.array([r["thin"] for r in results])),
         "max_steps_reached": (("wavelength",), np.array([int(r["max_steps_reached"]) for r in results])),
     }
+    if joint is not None:
+        sample_stats["r_s_factor_autocorr_time"] = (("card",), factor_autocorr)
     observed = np.stack([problem.observed(i) for i in range(n_wl)])
     known = problem.known_eps(eps)
     constant = {
@@ -951,6 +1052,9 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
         "parameter_names": json.dumps(parameters),
         "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "sampling_wall_time_s": float(time.perf_counter() - started),
+        "substrate_factors": json.dumps(None if joint is None else {
+            "relative_sd": joint.relative_sd, "cards": list(joint.cards),
+            "prior": joint.describe_prior()}),
     }
     datasets = {
         "posterior": xr.Dataset(posterior, coords=post_coords),
@@ -960,13 +1064,18 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
         "observed_data": xr.Dataset({"y": (("wavelength", "value"), observed)},
                                     coords={"wavelength": wavelength, **value_coords}),
         "constant_data": xr.Dataset(constant, coords={"wavelength": wavelength, **value_coords}),
-        "sample_stats": xr.Dataset(sample_stats, coords={**coords, "parameter": parameters}),
+        "sample_stats": xr.Dataset(sample_stats, coords={**coords, "parameter": parameters,
+                                                         **({"card": list(joint.cards)} if joint else {})}),
     }
     for dataset in datasets.values():
         dataset.attrs.update(attrs)
     idata = az.InferenceData(attrs=attrs, **datasets)
     capped = [w for w, r in zip(wavelength, results) if r["max_steps_reached"]]
-    if capped:
+    if capped and joint is not None:
+        warnings.warn(f"the joint run with substrate factors was capped at max_steps={settings.max_steps} "
+                      f"before reaching {settings.min_autocorr_multiple:g} autocorrelation times / ESS "
+                      f"{settings.target_ess:g}", ConvergenceWarning, stacklevel=2)
+    elif capped:
         warnings.warn(
             f"run length capped at max_steps={settings.max_steps} before reaching "
             f"{settings.min_autocorr_multiple:g} autocorrelation times / ESS {settings.target_ess:g} at "
@@ -975,7 +1084,7 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
 
 
 def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, executor=None,
-          progress=True, priors=None, settings=None):
+          progress=True, priors=None, settings=None, substrate_sd=None):
     """Posterior of ``a`` and ``tau`` (and ``g``, ``eps``) per wavelength from a measurement set.
 
     Parameters
@@ -1004,6 +1113,13 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         Default: ``a`` uniform on [0, 1], ``tau`` log-uniform on [0.01, 100], ``g`` uniform on
         [-0.5, 0.8], ``eps`` log-uniform on [0.001, 0.5].
     settings : InferenceSettings, optional
+    substrate_sd : float, optional
+        Treat every card's albedo seen from the binder as uncertain: ``r_s = f_card r_s,card``
+        with one factor per card shared by all wavelengths, ``log f ~ N(0, substrate_sd^2)``
+        (e.g. 0.1 for the ~10 % of the paper's section 3.4). The posterior is then joint over
+        all wavelengths (:mod:`bayespig.substrate_nuisance`; slower: one run of
+        ``n_wavelengths * (1 + groups) + cards`` parameters) and holds ``r_s_factor`` over
+        ``(chain, draw, card)``. Needs ``g="isotropic"`` and a known ``eps``.
 
     Returns
     -------
@@ -1037,8 +1153,20 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         method = f"method{int(method)}"
     eps_value, _ = _resolve_eps(eps, measurements)
     problem = Problem.from_measurements(measurements, method)
+    substrate = None
+    if substrate_sd is not None:
+        from .substrate_nuisance import card_indices
+
+        if not (isinstance(substrate_sd, (int, float, np.floating)) and np.isfinite(substrate_sd)
+                and substrate_sd > 0):
+            raise ValueError(f"substrate_sd must be a positive number, got {substrate_sd!r}")
+        if g != "isotropic" or eps_value is None:
+            raise ValueError("substrate_sd needs g='isotropic' and a known eps (the joint run over all "
+                             "wavelengths does not sample g or eps)")
+        cards, card_index = card_indices(measurements, problem)
+        substrate = (cards, card_index, float(substrate_sd))
     return infer_problem(problem, seed=seed, g=g, eps=eps_value, executor=executor,
-                         progress=progress, priors=priors, settings=settings)
+                         progress=progress, priors=priors, settings=settings, substrate=substrate)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -8,28 +8,22 @@ converted ``r_s``) or bias ``a`` and ``tau``. Here each card ``c`` gets a factor
 
     r_s(λ) = f_c * r_s,card(λ),    log f_c ~ N(0, relative_sd^2),
 
-one per card and film set, the same at every wavelength (so that it stays identifiable: a
-per-wavelength factor would trade off against ``a`` and ``tau`` wavelength by wavelength). The
-posterior is joint over all wavelengths: parameters
+one per card, the same at every wavelength (so that it stays identifiable: a per-wavelength
+factor would trade off against ``a`` and ``tau`` wavelength by wavelength). The factor couples
+the wavelengths, so the posterior is joint over all of them: parameters
 ``[a_λ (n_wl), log tau_λ,group (n_wl * G), log f_card (n_cards)]`` with the priors of
 :class:`bayespig.likelihood.Priors` on ``a`` and ``tau`` and the likelihood of eq. (7) with a
-known relative error ``eps``. It is sampled with emcee (differential-evolution moves, walkers
-started around the point fit at ``f = 1``).
+known relative error ``eps``. :func:`bayespig.infer` samples it with ``substrate_sd=`` (the
+same ensembles, moves, run-length rule and diagnostics as the per-wavelength runs, on the
+joint vector; one vectorised table call evaluates every wavelength of every walker) and
+stores the factors as the posterior variable ``r_s_factor`` over ``(chain, draw, card)``.
 
 Identifiability: a factor is learned from the data only when the films over that card have
 more values per wavelength than parameters (multi-angle instruments, several film groups of one
 pigment) or when the fixed card makes the model infeasible; with one sphere value per card and
 wavelength (method 4 on an 8°/d instrument) every ``f`` within the feasible range fits exactly
-and the factor's posterior is its prior truncated by feasibility. Both are reported honestly by
-:func:`substrate_factor_posterior`.
-
-Wiring into :func:`bayespig.inference.infer` (not done here): ``infer`` samples each wavelength
-independently; a card factor couples them. What it needs is (1) the card of every reflectance
-film (``MeasurementSet.sample(name).substrate``) -> an index, as built by :func:`card_indices`;
-(2) the extra coordinates ``log f`` appended after ``[a, log tau.., (g), (log eps)]`` of every
-wavelength and a Gaussian prior term; (3) ``WavelengthModel.__call__(..., r_s_scale=f[:, card])``
-(the keyword added for this purpose); and (4) either a joint sampler over all wavelengths (as
-here) or a Gibbs step alternating per-wavelength updates with a factor update.
+and the factor's posterior is its prior truncated by feasibility. The posterior of ``a`` and
+``tau`` is then wider than with a fixed card: the card's uncertainty is propagated.
 
 References
 ----------
@@ -38,23 +32,28 @@ Ershov, Voloboy & Pozdnyakov (2023), eq. (3), eq. (7), section 3.4.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from .likelihood import ForwardModel, Priors, Problem
+from .likelihood import Priors, multiplicative_normal_logpdf
 
 __all__ = [
     "DEFAULT_RELATIVE_SD",
-    "SubstrateNuisancePosterior",
-    "SubstrateNuisanceResult",
+    "FACTOR_PRIOR_SDS",
+    "CardFactorLogPosterior",
+    "ConditionalBlocksMove",
     "card_indices",
-    "substrate_factor_posterior",
 ]
 
 #: Default prior sd of ``log f`` (about 10 % relative, paper section 3.4).
 DEFAULT_RELATIVE_SD = 0.1
-_LOG_2PI = np.log(2.0 * np.pi)
+#: Levenberg-Marquardt damping (relative to the mean eigenvalue of J^T J) of the factors'
+#: sensitivity: in a ravine the undamped Gauss-Newton step along the ravine is huge and only
+#: valid for tiny factor changes. Any sensitivity gives a valid sampler (it is a change of
+#: coordinates with unit Jacobian); this one only sets how well the factor moves mix.
+SENSITIVITY_DAMPING = 1e-3
+#: The log-normal prior of a factor is truncated at this many sds (a bounded box for the
+#: sampler's start and moves; the mass beyond is 6e-7).
+FACTOR_PRIOR_SDS = 5.0
 
 
 def card_indices(measurements, problem):
@@ -87,202 +86,302 @@ def card_indices(measurements, problem):
     return tuple(cards), np.array(index, dtype=int)
 
 
-class SubstrateNuisancePosterior:
+class CardFactorLogPosterior:
     """Joint log-posterior over all wavelengths with one ``r_s`` factor per card.
+
+    Sampled in *residual* coordinates ``u = [r_a (n_wl), r_log_tau (n_wl * G), log f (n_cards)]``
+    with the physical parameters ``theta_λ = theta_hat_λ + r_λ + S_λ log f``: ``theta_hat``
+    is the point fit at ``f = 1`` and ``S_λ = d theta_hat_λ / d log f`` its sensitivity to
+    the factors (Gauss-Newton, :meth:`_sensitivity`). The map is a translation for every
+    ``f`` (unit Jacobian), so the density is the same in either coordinates; but a change
+    of ``f`` at fixed ``r`` moves every wavelength's ``(a, tau)`` along with it, which is what
+    the data ask for (with one value per card and wavelength a film is fitted exactly at any
+    feasible ``f``). In ``u`` the wavelengths are independent given ``f`` and only weakly
+    coupled to it, which :class:`ConditionalBlocksMove` uses.
+
+    The interface of :class:`bayespig.likelihood.LogPosterior` (``lower``, ``upper``,
+    ``n_dim``, ``parameter_names``, ``in_support``, call on ``u`` of shape (W, n_dim)), so
+    that :func:`bayespig.inference.infer` samples it with its own run-length rule and
+    diagnostics.
 
     Parameters
     ----------
     model : ForwardModel
+        Isotropic.
     card_index : array_like of int
         Card of every reflectance film (problem order), e.g. from :func:`card_indices`.
+    theta_hat : numpy.ndarray
+        Point fit per wavelength ``[a, log tau_1..G]``, shape (n_wavelengths, 1 + G).
     priors : Priors, optional
         Ranges of ``a`` and ``tau`` (default :class:`~bayespig.likelihood.Priors`).
     eps : float
-        Known relative measurement error of eq. (7) [-].
+        Known relative measurement error of eq. (7) for films without their own [-].
     relative_sd : float
         Prior sd of ``log f`` [-].
+    cards : sequence of str, optional
+        Card names (for ``parameter_names``).
 
     Notes
     -----
-    Parameter vector (per walker): ``a`` at each wavelength, then ``log tau`` (wavelength-major,
-    group-minor), then ``log f`` per card. Called with ``theta`` of shape (W, n_dim).
+    The prior: ``a`` uniform, ``log tau`` uniform on the boxes of :class:`Priors`; ``log f``
+    normal with sd ``relative_sd``, truncated at :data:`FACTOR_PRIOR_SDS` sds and where a card
+    would exceed ``r_s = 1`` at some wavelength.
     """
 
-    def __init__(self, model, card_index, priors=None, eps=0.01, relative_sd=DEFAULT_RELATIVE_SD):
+    def __init__(self, model, card_index, theta_hat, priors=None, eps=0.01,
+                 relative_sd=DEFAULT_RELATIVE_SD, cards=None):
         priors = Priors() if priors is None else priors
+        if model.g != "isotropic":
+            raise ValueError("substrate factors are implemented for isotropic scattering (g fixed at 0)")
         if not (np.isfinite(eps) and eps > 0):
             raise ValueError(f"eps must be a positive number, got {eps!r}")
         if not (np.isfinite(relative_sd) and relative_sd > 0):
             raise ValueError(f"relative_sd must be a positive number, got {relative_sd!r}")
         problem = model.problem
+        self.model = model
         self.card_index = np.asarray(card_index, dtype=int)
         n_reflectance = sum(f.kind == "reflectance" for f in problem.films)
         if self.card_index.shape != (n_reflectance,):
             raise ValueError(f"card_index needs one entry per reflectance film ({n_reflectance}), "
                              f"got shape {self.card_index.shape}")
         self.n_cards = int(self.card_index.max()) + 1 if n_reflectance else 0
-        self.n_wavelengths = problem.n_wavelengths
-        self.n_groups = len(problem.groups)
-        self.evaluators = [model.at_wavelength(i) for i in range(self.n_wavelengths)]
-        self.observed = [problem.observed(i) for i in range(self.n_wavelengths)]
-        self.r_s_max = np.zeros(self.n_cards)
+        if self.n_cards == 0:
+            raise ValueError("substrate factors need at least one reflectance film over a card")
+        self.n_wavelengths = n_wl = problem.n_wavelengths
+        self.n_groups = G = len(problem.groups)
+        if G == 0:
+            raise ValueError("substrate factors need a film that does not hide its card")
+        self.evaluate = model.at_wavelength(list(range(n_wl)))
+        self.observed = np.stack([problem.observed(i) for i in range(n_wl)])
+        self.eps = problem.known_eps(eps)
+        r_s_max = np.zeros(self.n_cards)
         k = 0
         for film in problem.films:
             if film.kind == "reflectance":
                 c = self.card_index[k]
-                self.r_s_max[c] = max(self.r_s_max[c], float(np.max(film.r_s)))
+                r_s_max[c] = max(r_s_max[c], float(np.max(film.r_s)))
                 k += 1
-        self.eps = float(eps)
         self.relative_sd = float(relative_sd)
         self.priors = priors
-        n_wl, G = self.n_wavelengths, self.n_groups
-        self.lower = np.concatenate([np.full(n_wl, priors.a_range[0]),
-                                     np.full(n_wl * G, np.log(priors.tau_range[0])),
-                                     np.full(self.n_cards, -np.inf)])
-        self.upper = np.concatenate([np.full(n_wl, priors.a_range[1]),
-                                     np.full(n_wl * G, np.log(priors.tau_range[1])),
-                                     -np.log(np.maximum(self.r_s_max, 1e-12))])  # r_s f <= 1
+        self.cards = tuple(str(c) for c in cards) if cards is not None else tuple(map(str, range(self.n_cards)))
+        bound = FACTOR_PRIOR_SDS * self.relative_sd
+        self.log_f_lower = np.full(self.n_cards, -bound)
+        self.log_f_upper = np.minimum(bound, -np.log(np.maximum(r_s_max, 1e-12)))  # r_s f <= 1
+        self.theta_lower = np.concatenate([np.full(n_wl, priors.a_range[0]),
+                                           np.full(n_wl * G, np.log(priors.tau_range[0]))])
+        self.theta_upper = np.concatenate([np.full(n_wl, priors.a_range[1]),
+                                           np.full(n_wl * G, np.log(priors.tau_range[1]))])
+        theta_hat = np.asarray(theta_hat, dtype=float).reshape(n_wl, 1 + G)
+        self.theta_hat = np.concatenate([theta_hat[:, 0], theta_hat[:, 1:].reshape(-1)])
+        self.theta_hat = np.clip(self.theta_hat, self.theta_lower, self.theta_upper)
+        self.sensitivity = self._sensitivity()  # (n_wl * (1 + G), n_cards)
+        # a box holding the support in u (for the sampler's start ball and straggler moves)
+        reach = np.abs(self.sensitivity) @ np.maximum(np.abs(self.log_f_lower), np.abs(self.log_f_upper))
+        self.lower = np.concatenate([self.theta_lower - self.theta_hat - reach, self.log_f_lower])
+        self.upper = np.concatenate([self.theta_upper - self.theta_hat + reach, self.log_f_upper])
+        wl = [f"{w:g}" for w in problem.wavelength_nm]
+        self.parameter_names = tuple([f"r_a[{w}]" for w in wl]
+                                     + [f"r_log_tau[{w},{g}]" for w in wl for g in problem.groups]
+                                     + [f"log_r_s_factor[{c}]" for c in self.cards])
+        #: Coordinates of each wavelength's block in ``u`` (n_wl, 1 + G), and of the factors.
+        self.blocks = np.concatenate([np.arange(n_wl)[:, None],
+                                      n_wl + np.arange(n_wl * G).reshape(n_wl, G)], axis=1)
+        self.factor_slice = slice(n_wl * (1 + G), n_wl * (1 + G) + self.n_cards)
 
     @property
     def n_dim(self):
         """Number of parameters."""
         return self.n_wavelengths * (1 + self.n_groups) + self.n_cards
 
-    def pack(self, a, tau, factors):
-        """Parameter vectors from ``a`` (W, n_wl), ``tau`` (W, n_wl, G) and factors (W, n_cards)."""
-        a = np.atleast_2d(a)
-        W = a.shape[0]
-        return np.concatenate([a, np.log(np.asarray(tau)).reshape(W, -1),
-                               np.log(np.atleast_2d(factors))], axis=1)
+    def describe_prior(self):
+        """The factors' prior as text (for the provenance)."""
+        return (f"log f ~ N(0, {self.relative_sd:g}^2) per card, truncated at {FACTOR_PRIOR_SDS:g} sd "
+                "and at r_s f <= 1")
 
-    def unpack(self, theta):
-        """``a`` (W, n_wl), ``tau`` (W, n_wl, G), factors (W, n_cards)."""
-        theta = np.atleast_2d(theta)
+    def _predict_theta(self, theta, log_f):
+        """Values of every wavelength, (W, n_wl, n_values), from physical ``theta`` and ``log f``."""
         n_wl, G = self.n_wavelengths, self.n_groups
+        W = theta.shape[0]
         a = theta[:, :n_wl]
-        tau = np.exp(theta[:, n_wl:n_wl * (1 + G)]).reshape(-1, n_wl, G)
-        return a, tau, np.exp(theta[:, n_wl * (1 + G):])
+        tau = np.exp(theta[:, n_wl:]).reshape(W, n_wl, G)
+        member = np.tile(np.arange(n_wl), W)
+        scale = np.repeat(np.exp(log_f)[:, self.card_index], n_wl, axis=0)
+        values = self.evaluate(a.reshape(-1), tau.reshape(W * n_wl, G), None, scale, member=member)
+        return values.reshape(W, n_wl, -1)
 
-    def __call__(self, theta):
-        """Log-posterior (up to a constant), shape (W,)."""
-        theta = np.atleast_2d(np.asarray(theta, dtype=float))
-        out = np.full(theta.shape[0], -np.inf)
-        ok = ((theta >= self.lower) & (theta <= self.upper)).all(axis=1)
-        if not ok.any():
-            return out
-        a, tau, factors = self.unpack(theta[ok])
-        log_f = np.log(factors)
-        value = -0.5 * np.sum((log_f / self.relative_sd) ** 2, axis=1)
-        scale = factors[:, self.card_index]
+    def _sensitivity(self, step=1e-4):
+        """``d theta_hat / d log f`` per wavelength by Gauss-Newton on the weighted residuals.
+
+        ``S = -(J_theta^T J_theta)^+ J_theta^T J_f`` with ``J`` the derivatives of the residuals
+        ``(x_obs / x_model - 1) / eps`` (central differences), damped by
+        :data:`SENSITIVITY_DAMPING`; directions the data do not constrain (e.g. ``tau`` of a film
+        that hides its card) get no shift.
+        """
+        n_wl, G, C = self.n_wavelengths, self.n_groups, self.n_cards
+        base = np.concatenate([self.theta_hat, np.zeros(C)])
+        inner = np.clip(base[:-C], self.theta_lower + step, self.theta_upper - step)
+        base[:-C] = inner
+        steps = np.eye(base.size) * step
+        points = np.concatenate([base + steps, base - steps])
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            for i, evaluate in enumerate(self.evaluators):
-                model = evaluate(a[:, i], tau[:, i, :], None, scale)
-                z = (self.observed[i] / model - 1.0) / self.eps
-                value += -0.5 * np.sum(z * z, axis=1) - np.sum(np.log(model), axis=1)
-        value[~np.isfinite(value)] = -np.inf
-        out[ok] = value
+            values = self._predict_theta(points[:, :-C], points[:, -C:])
+            residual = (self.observed / values - 1.0) / self.eps
+        derivative = (residual[:base.size] - residual[base.size:]) / (2.0 * step)  # (n_dim, n_wl, n_values)
+        derivative = np.nan_to_num(derivative, nan=0.0, posinf=0.0, neginf=0.0)
+        out = np.zeros((n_wl * (1 + G), C))
+        for i in range(n_wl):
+            rows = np.concatenate([[i], n_wl + i * G + np.arange(G)])
+            J_theta = derivative[rows, i].T  # (n_values, 1 + G)
+            J_f = derivative[-C:, i].T  # (n_values, C)
+            normal = J_theta.T @ J_theta
+            damping = SENSITIVITY_DAMPING * np.trace(normal) / normal.shape[0] + 1e-300
+            out[rows] = -np.linalg.solve(normal + damping * np.eye(normal.shape[0]), J_theta.T @ J_f)
         return out
 
+    def theta_of(self, u):
+        """Physical ``[a (n_wl), log tau (n_wl * G)]`` and ``log f`` from ``u``."""
+        u = np.atleast_2d(u)
+        log_f = u[:, self.factor_slice]
+        return self.theta_hat + u[:, :self.factor_slice.start] + log_f @ self.sensitivity.T, log_f
 
-@dataclass(frozen=True)
-class SubstrateNuisanceResult:
-    """Samples of the joint posterior with card factors.
+    def unpack(self, u):
+        """``a`` (W, n_wl), ``tau`` (W, n_wl, G), factors (W, n_cards)."""
+        theta, log_f = self.theta_of(u)
+        n_wl = self.n_wavelengths
+        return theta[:, :n_wl], np.exp(theta[:, n_wl:]).reshape(-1, n_wl, self.n_groups), np.exp(log_f)
 
-    Attributes
-    ----------
-    cards : tuple of str
-    factors : numpy.ndarray
-        Shape (n_samples, n_cards): ``f`` per card [-].
-    a : numpy.ndarray
-        Shape (n_samples, n_wavelengths).
-    tau : numpy.ndarray
-        Shape (n_samples, n_wavelengths, n_groups).
-    wavelength_nm : numpy.ndarray
-    settings : dict
-        Seed, walkers, steps, burn-in, eps, relative_sd, acceptance fraction, emcee version.
-    """
+    def in_support(self, u):
+        """Boolean mask of parameter vectors inside the prior's support."""
+        theta, log_f = self.theta_of(u)
+        return (((theta >= self.theta_lower) & (theta <= self.theta_upper)).all(axis=1)
+                & ((log_f >= self.log_f_lower) & (log_f <= self.log_f_upper)).all(axis=1))
 
-    cards: tuple
-    factors: np.ndarray
-    a: np.ndarray
-    tau: np.ndarray
-    wavelength_nm: np.ndarray
-    settings: dict
+    def predict(self, u):
+        """Predicted values of every wavelength, shape (W, n_wavelengths, n_values)."""
+        theta, log_f = self.theta_of(u)
+        return self._predict_theta(theta, log_f)
 
-    def summary(self, probability=0.9):
-        """Card -> (median, lower, upper) of the central ``probability`` interval of ``f``."""
-        q = [0.5, (1 - probability) / 2, (1 + probability) / 2]
-        return {card: tuple(float(v) for v in np.quantile(self.factors[:, k], q))
-                for k, card in enumerate(self.cards)}
+    def log_likelihood(self, u):
+        """Pointwise log-likelihood of eq. (7), shape (W, n_wavelengths, n_values)."""
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            return multiplicative_normal_logpdf(self.observed, self.predict(u), self.eps)
+
+    def wavelength_terms(self, u):
+        """Log-likelihood of each wavelength, (W, n_wl); ``-inf`` where its ``(a, tau)`` or ``f``
+        leave the prior's box."""
+        u = np.atleast_2d(np.asarray(u, dtype=float))
+        theta, log_f = self.theta_of(u)
+        n_wl, G = self.n_wavelengths, self.n_groups
+        inside = (theta >= self.theta_lower) & (theta <= self.theta_upper)
+        block_ok = inside[:, :n_wl] & inside[:, n_wl:].reshape(-1, n_wl, G).all(axis=2)
+        block_ok &= ((log_f >= self.log_f_lower) & (log_f <= self.log_f_upper)).all(axis=1)[:, None]
+        terms = np.full((u.shape[0], n_wl), -np.inf)
+        rows = block_ok.any(axis=1)
+        if rows.any():
+            safe = np.clip(theta[rows], self.theta_lower, self.theta_upper)
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                values = multiplicative_normal_logpdf(self.observed, self._predict_theta(safe, log_f[rows]),
+                                                      self.eps).sum(axis=2)
+            values[~np.isfinite(values)] = -np.inf
+            terms[rows] = np.where(block_ok[rows], values, -np.inf)
+        return terms
+
+    def log_prior_factors(self, u):
+        """Log-density of the factors' prior (normal in ``log f``, up to a constant), (W,)."""
+        log_f = np.atleast_2d(u)[:, self.factor_slice]
+        return -0.5 * np.sum((log_f / self.relative_sd) ** 2, axis=1)
+
+    def __call__(self, u, member=None):
+        """Log-posterior (up to a constant), shape (W,); ``member`` is ignored (one joint problem)."""
+        u = np.atleast_2d(np.asarray(u, dtype=float))
+        return self.log_prior_factors(u) + self.wavelength_terms(u).sum(axis=1)
 
 
-def substrate_factor_posterior(measurements, *, method="auto", eps=0.01, relative_sd=DEFAULT_RELATIVE_SD,
-                               priors=None, seed=0, n_walkers=None, n_steps=3000, burn_in=None,
-                               thin=10, tables=None):
-    """Sample the posterior of ``a``, ``tau`` and one substrate factor per card (all wavelengths jointly).
+class ConditionalBlocksMove:
+    """Red-blue ensemble update of :class:`CardFactorLogPosterior`, block by block.
+
+    Within each of ``n_ensembles`` independent ensembles (one arviz chain each, as
+    :class:`bayespig.inference.IndependentEnsemblesMove`), every walker of one half is updated
+    from the other half in two steps:
+
+    1. every wavelength's block ``(r_a, r_log_tau)`` by a differential-evolution proposal
+       (ter Braak 2006; ``gamma = 2.38 / sqrt(2 d_block)``) from the block's values in two
+       walkers of the other half, each block accepted or rejected **on its own** with its own
+       likelihood term: given ``f`` the wavelengths are independent, so the joint kernel is
+       the product of the blocks' Metropolis kernels;
+    2. the factors ``log f`` by the same proposal in their block, accepted on the whole
+       log-posterior.
+
+    Mixing is then that of a few-parameter problem per block instead of one of
+    ``n_wavelengths * (1 + G) + n_cards`` dimensions. Both proposals are symmetric and depend
+    on the other half only, so detailed balance holds (Foreman-Mackey et al. 2013).
 
     Parameters
     ----------
-    measurements : MeasurementSet
-    method : str
-        Samples used (:meth:`bayespig.likelihood.Problem.from_measurements`).
-    eps : float
-        Known relative measurement error of eq. (7) [-].
-    relative_sd : float
-        Prior sd of ``log f`` [-] (default 0.1, ~10 %).
-    priors : Priors, optional
-        Ranges of ``a`` and ``tau`` (default :class:`~bayespig.likelihood.Priors`).
-    seed : int
-        Seeds the starting jitter and emcee's random state (``numpy.random.default_rng``).
-    n_walkers : int, optional
-        Default ``max(4 * n_dim, 32)``, even.
-    n_steps : int
-        Steps per walker.
-    burn_in : int, optional
-        Steps discarded (default half of ``n_steps``).
-    thin : int
-        Keep every ``thin``-th step.
-    tables : dict, optional
-        Instrument -> isotropic look-up table.
-
-    Returns
-    -------
-    SubstrateNuisanceResult
+    log_post : CardFactorLogPosterior
+    n_ensembles : int
     """
-    import emcee
 
-    from .fit import fit_problem
+    def __init__(self, log_post, n_ensembles):
+        self.log_post = log_post
+        self.n_ensembles = int(n_ensembles)
+        self.frozen = None  # the interface of IndependentEnsemblesMove (one member: never frozen)
 
-    priors = Priors() if priors is None else priors
-    problem = Problem.from_measurements(measurements, method)
-    model = ForwardModel(problem, "isotropic", dict(tables or {}))
-    cards, index = card_indices(measurements, problem)
-    log_post = SubstrateNuisancePosterior(model, index, priors, eps, relative_sd)
-    fit = fit_problem(problem, tables=model.tables, warn=False)
-    a0 = np.clip(fit.a, priors.a_range[0] + 1e-4, priors.a_range[1] - 1e-4)
-    tau0 = np.clip(fit.tau, priors.tau_range[0] * 1.01, priors.tau_range[1] / 1.01)
-    theta0 = log_post.pack(a0[None], tau0[None], np.ones((1, log_post.n_cards)))[0]
-    n_dim = log_post.n_dim
-    n_walkers = n_walkers or max(4 * n_dim, 32)
-    n_walkers += n_walkers % 2
-    rng = np.random.default_rng(seed)
-    start = []
-    while len(start) < n_walkers:
-        trial = theta0 + rng.normal(0.0, 1e-3, (n_walkers, n_dim))
-        trial[:, -log_post.n_cards:] = rng.normal(0.0, 0.2 * relative_sd, (n_walkers, log_post.n_cards))
-        start.extend(trial[np.isfinite(log_post(trial))])
-    start = np.array(start[:n_walkers])
-    sampler = emcee.EnsembleSampler(
-        n_walkers, n_dim, log_post, vectorize=True,
-        moves=[(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)],
-    )
-    sampler.random_state = np.random.RandomState(rng.integers(2**32 - 1)).get_state()
-    sampler.run_mcmc(start, n_steps, progress=False)
-    burn_in = n_steps // 2 if burn_in is None else int(burn_in)
-    chain = sampler.get_chain(discard=burn_in, thin=thin, flat=True)
-    a, tau, factors = log_post.unpack(chain)
-    settings = {"seed": seed, "n_walkers": n_walkers, "n_steps": n_steps, "burn_in": burn_in, "thin": thin,
-                "eps": eps, "relative_sd": relative_sd, "method": problem.method,
-                "acceptance_fraction": float(np.mean(sampler.acceptance_fraction)),
-                "emcee": emcee.__version__, "priors": priors.describe()}
-    return SubstrateNuisanceResult(cards, factors, a, tau, np.asarray(problem.wavelength_nm), settings)
+    def tune(self, state, accepted):
+        """No tuning (emcee's interface)."""
+
+    @staticmethod
+    def _de_step(s, c, columns, random):
+        """DE proposals of the coordinates ``columns`` (..., k) for walkers ``s`` (E, h, d) from ``c``."""
+        n_ens, h, _ = s.shape
+        m = c.shape[1]
+        shape = (n_ens, h) + columns.shape[:-1]
+        first = random.randint(0, m, size=shape)
+        second = random.randint(0, m - 1, size=shape)
+        second += second >= first
+        ens = np.arange(n_ens).reshape((n_ens,) + (1,) * (len(shape) - 1))
+        d = columns.shape[-1]
+        gamma = 2.38 / np.sqrt(2.0 * d) * (1.0 + 1e-5 * random.randn(*shape))
+        diff = c[ens[..., None], first[..., None], columns] - c[ens[..., None], second[..., None], columns]
+        return gamma[..., None] * diff
+
+    def propose(self, model, state):
+        """One red-blue update of every walker of every ensemble (emcee's Move interface)."""
+        lp = self.log_post
+        n_total, n_dim = state.coords.shape
+        width = n_total // self.n_ensembles
+        half = width // 2
+        if width * self.n_ensembles != n_total or width % 2 or half < 3:
+            raise RuntimeError("ConditionalBlocksMove needs an even number (>= 6) of walkers per ensemble")
+        random = model.random
+        order = np.argsort(random.rand(self.n_ensembles, width), axis=1)
+        order += (np.arange(self.n_ensembles) * width)[:, None]
+        accepted = np.zeros(n_total, dtype=bool)
+        factor_columns = np.arange(lp.factor_slice.start, lp.factor_slice.stop)
+        for active, other in ((order[:, :half], order[:, half:]), (order[:, half:], order[:, :half])):
+            s, c = state.coords[active], state.coords[other]
+            index = active.reshape(-1)
+            current = s.reshape(-1, n_dim)
+            # 1. wavelength blocks, each accepted on its own term
+            q = current.copy()
+            step = self._de_step(s, c, lp.blocks, random).reshape(index.size, *lp.blocks.shape)
+            q[:, lp.blocks] += step
+            old_terms, new_terms = lp.wavelength_terms(current), lp.wavelength_terms(q)
+            with np.errstate(invalid="ignore"):
+                take = new_terms - old_terms > np.log(random.rand(*new_terms.shape))
+            moved = current.copy()
+            moved_cols = np.where(take[..., None], q[:, lp.blocks], current[:, lp.blocks])
+            moved[:, lp.blocks] = moved_cols
+            terms = np.where(take, new_terms, old_terms)
+            # 2. the factors, on the whole log-posterior
+            q = moved.copy()
+            q[:, factor_columns] += self._de_step(s, c, factor_columns[None], random).reshape(index.size, -1)
+            before = lp.log_prior_factors(moved) + terms.sum(axis=1)
+            after = lp(q)
+            with np.errstate(invalid="ignore"):
+                ok = after - before > np.log(random.rand(index.size))
+            moved[ok] = q[ok]
+            state.coords[index] = moved
+            state.log_prob[index] = np.where(ok, after, before)
+            accepted[index] = ok | take.any(axis=1)
+        return state, accepted

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["INFER_METHODS", "METHOD_NAMES", "add_film_argument", "parse_methods", "parse_numbers", "read_film"]
+__all__ = ["INFER_METHODS", "METHOD_NAMES", "add_film_argument", "add_substrate_argument", "parse_methods",
+           "parse_numbers", "read_film"]
 
 #: ``--method 1,4`` -> the paper's method names.
 METHOD_NAMES = {"1": "method1", "2": "method2", "3": "method3", "4": "method4"}
@@ -58,3 +59,11 @@ def read_film(path, film):
     from ..data import read_measurements
 
     return read_measurements(path, film=film)
+
+
+def add_substrate_argument(parser):
+    """``--substrate-sd SD``: the cards' albedo as a nuisance parameter (one factor per card)."""
+    parser.add_argument("--substrate-sd", type=float, default=None, metavar="SD",
+                        help="treat each card's albedo seen from the binder as uncertain: one factor per "
+                        "card, log-normal prior with this sd (e.g. 0.1 for ~10 %%, paper section 3.4); "
+                        "samples all wavelengths jointly (slower); needs a known eps")

@@ -10,7 +10,7 @@ import numpy as np
 
 from .._atomic import atomic_path
 from ._arguments import INFER_METHODS as _METHODS
-from ._arguments import add_film_argument, read_film
+from ._arguments import add_film_argument, add_substrate_argument, read_film
 
 __all__ = ["add_infer_parser", "run_infer"]
 
@@ -32,6 +32,7 @@ def add_infer_parser(subparsers):
                              "the most robust one the samples support)")
     parser.add_argument("--out", required=True, help="output directory")
     add_film_argument(parser)
+    add_substrate_argument(parser)
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--g", default="isotropic", choices=("isotropic", "free"),
                         help="Henyey-Greenstein g fixed at 0 (default) or a parameter")
@@ -69,7 +70,7 @@ def run_infer(args):
         save_inference,
         summarize,
     )
-    from ..report.quantities import posterior_predictive_check
+    from ..report.quantities import card_factors, posterior_predictive_check
 
     eps = _eps_argument(args.eps)
     overrides = {name: value for name, value in (("n_walkers", args.walkers),
@@ -80,8 +81,9 @@ def run_infer(args):
         raise ValueError(f"{args.measurements}: no such file")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ConvergenceWarning)
-        idata = infer(read_film(args.measurements, args.film), method=_METHODS[args.method], seed=args.seed, g=args.g,
-                      eps=eps, progress=not args.no_progress, settings=settings)
+        idata = infer(read_film(args.measurements, args.film), method=_METHODS[args.method], seed=args.seed,
+                      g=args.g, eps=eps, progress=not args.no_progress, settings=settings,
+                      substrate_sd=args.substrate_sd)
         flagged = diagnose(idata, warn=False)
     for warning in caught:
         print(f"bayespig: warning: {warning.message}", file=sys.stderr)
@@ -97,6 +99,9 @@ def run_infer(args):
     print(f"bayespig infer: {idata.posterior.attrs['method']}, g {args.g}, "
           f"eps {idata.posterior.attrs['eps_mode']}, seed {args.seed}")
     print(summary[columns].to_string(float_format=lambda v: f"{v:.4g}"))
+    for factor in card_factors(idata):
+        print(f"card {factor['card']}: r_s factor {factor['median']:.3f} [{factor['low']:.3f}, "
+              f"{factor['high']:.3f}] (90 %; prior sd {factor['relative_sd']:g} in log f)")
     print(f"wrote {posterior_path} and {summary_path}")
     sys.stdout.flush()
     check = posterior_predictive_check(idata)

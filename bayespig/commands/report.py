@@ -7,7 +7,7 @@ import sys
 import warnings
 
 from ._arguments import INFER_METHODS as _METHODS
-from ._arguments import add_film_argument, read_film
+from ._arguments import add_film_argument, add_substrate_argument, read_film
 
 __all__ = ["add_demo_parser", "add_report_parser", "run_demo", "run_report"]
 
@@ -31,6 +31,7 @@ def add_report_parser(subparsers):
     parser.add_argument("--measurements", default=None,
                         help="the measurement file of a posterior (thickness, concentration, truth)")
     add_film_argument(parser)
+    add_substrate_argument(parser)
     parser.add_argument("--method", default="auto", choices=sorted(_METHODS),
                         help="when inferring: the paper's method (default auto)")
     parser.add_argument("--seed", type=int, default=0, help="when inferring: random seed (default 0)")
@@ -60,7 +61,8 @@ def run_report(args):
 
     if not os.path.exists(args.source):
         raise ValueError(f"{args.source}: no such file")
-    infer_kwargs = {"method": _METHODS[args.method], "seed": args.seed, "g": args.g}
+    infer_kwargs = {"method": _METHODS[args.method], "seed": args.seed, "g": args.g,
+                    "substrate_sd": args.substrate_sd}
     source = read_film(args.source, args.film)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import sys
 
+import numpy as np
+
 __all__ = ["add_revigo_parser", "run_revigo"]
 
 
@@ -32,6 +34,12 @@ def add_revigo_parser(subparsers):
     parser.add_argument("--g-sensitivity", type=float, nargs="*", default=None, metavar="G",
                         help="also predict the tints at these fixed phase-function g (default "
                         "0.3 0.6; none to skip; uses the 8d-sce table with a g axis)")
+    parser.add_argument("--substrate-sd", type=float, default=None, metavar="SD",
+                        help="with --posterior: prior sd of log f of every card's albedo factor (default "
+                        "0.1, paper section 3.4); 0 keeps the converted cards fixed")
+    parser.add_argument("--substrate-films", default=None, metavar="IDS",
+                        help="with --posterior: sample the card factors for these films only (comma-separated "
+                        "ids, or 'white-rich': the white and every 10/90 tint; default all, 1-4 min per film)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--quiet", action="store_true", help="no progress messages")
     parser.set_defaults(func=run_revigo)
@@ -40,19 +48,32 @@ def add_revigo_parser(subparsers):
 
 def run_revigo(args):
     """Run the study and write the report; returns the exit code."""
-    from ..studies.revigo import G_SENSITIVITY, POSTERIOR_EPS, revigo_study, write_revigo_report
+    from ..studies.revigo import (
+        G_SENSITIVITY,
+        POSTERIOR_EPS,
+        POSTERIOR_SUBSTRATE_SD,
+        revigo_study,
+        write_revigo_report,
+    )
 
     eps = POSTERIOR_EPS if args.eps is None else args.eps
     if not (eps > 0 and eps < 1):
         raise ValueError(f"--eps must lie in (0, 1), got {args.eps}")
     if args.g_sensitivity and not all(-1.0 < g < 1.0 for g in args.g_sensitivity):
         raise ValueError(f"--g-sensitivity values must lie in (-1, 1), got {args.g_sensitivity}")
+    substrate_sd = POSTERIOR_SUBSTRATE_SD if args.substrate_sd is None else args.substrate_sd
+    if not (np.isfinite(substrate_sd) and substrate_sd >= 0):
+        raise ValueError(f"--substrate-sd must be >= 0, got {args.substrate_sd}")
     if args.draws < 10:
         raise ValueError(f"--draws must be >= 10, got {args.draws}")
     progress = None if args.quiet else (lambda message: print(message, file=sys.stderr, flush=True))
     study = revigo_study(args.path, specular=args.specular, progress=progress, posterior=args.posterior,
                          posterior_eps=eps, n_draws=args.draws, seed=args.seed,
-                         g_sensitivity=G_SENSITIVITY if args.g_sensitivity is None else tuple(args.g_sensitivity))
+                         g_sensitivity=G_SENSITIVITY if args.g_sensitivity is None else tuple(args.g_sensitivity),
+                         substrate_sd=substrate_sd,
+                         substrate_films=(None if args.substrate_films is None else args.substrate_films
+                                          if args.substrate_films == "white-rich"
+                                          else [f.strip() for f in args.substrate_films.split(",") if f.strip()]))
     path = write_revigo_report(study, args.report)
     print(f"wrote {path}: SCE/SCI decision {study.evidence['decision']}; "
           f"{len(study.series)} tint series")

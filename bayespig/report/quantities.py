@@ -48,6 +48,7 @@ __all__ = [
     "FilmDesign",
     "Lab_to_sRGB",
     "Ravine",
+    "card_factors",
     "colour_available",
     "colour_spectrum",
     "default_unmeasured_films",
@@ -429,6 +430,29 @@ def residuals_in_eps(idata, max_draws=None):
     return {"observed": observed, "predicted_mean": mean, "predicted_q05": q05,
             "predicted_q95": q95, "predicted_draws": predicted, "eps": eps, "z": z,
             "rows": value_table(idata)}
+
+
+def card_factors(idata, probability=0.9):
+    """The cards' albedo factors of a posterior inferred with ``substrate_sd`` (else empty).
+
+    Returns
+    -------
+    list of dict
+        Per card: ``card``, ``median``, ``low``, ``high`` (central ``probability`` interval) of
+        ``f`` in ``r_s = f r_s,card`` [-], and the prior's ``relative_sd``.
+    """
+    if "r_s_factor" not in idata.posterior:
+        return []
+    factors = idata.posterior["r_s_factor"]
+    recorded = _json_attr(_attrs(idata).get("substrate_factors")) or {}
+    tail = (1.0 - probability) / 2.0
+    out = []
+    for card in factors.coords["card"].values:
+        draws = np.asarray(factors.sel(card=card).values, dtype=float).ravel()
+        median, low, high = np.quantile(draws, [0.5, tail, 1.0 - tail])
+        out.append({"card": str(card), "median": float(median), "low": float(low), "high": float(high),
+                    "relative_sd": recorded.get("relative_sd")})
+    return out
 
 
 def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):

@@ -425,6 +425,17 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
                + (" (at g = 0, the start of the sampler)" if "g" in bands else "")
                + ("; dashed: truth of the synthetic pigment" if truth else "") + ". tau is the optical "
                f"thickness of film group '{groups[0] if groups else 'n/a'}'.")
+    factors = q.card_factors(idata)
+    if factors:
+        blocks.append(doc.paragraph(
+            "Substrate albedo as a nuisance parameter (paper section 3.4): every card's albedo seen from "
+            "the binder is r_s = f r_s,card with one factor f per card at all wavelengths, log f normal "
+            f"with sd {factors[0]['relative_sd']:g} a priori; the posterior is joint over the wavelengths, "
+            "so the card's uncertainty is in every band above. A factor whose interval is the prior's is "
+            "not identified by these measurements."))
+        blocks.append(doc.table(["card", "f median [90 %]"],
+                                [[f["card"], f"{f['median']:.3f} [{f['low']:.3f}, {f['high']:.3f}]"]
+                                 for f in factors]))
     if extinction:
         unit = "1/um"
         text = (f"Film group '{extinction['group']}' has a known dry thickness H = "
@@ -640,6 +651,7 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         "diagnostics": {k: diag[k] for k in ("ess", "rhat", "flags", "n_chains", "n_draws", "rhat_max", "ess_min")},
         "fit_quality": fit_rows,
         "model_check": {"level": check["level"], "p_value": check["p_value"], "misfit": misfit},
+        "substrate_factors": factors,
         "colour": colour_summary, "priors": priors.describe(),
         "ravine_wavelength_nm": float(wl[r_index]), "provenance": prov,
     }

@@ -62,6 +62,8 @@ POSTERIOR_DRAWS_PER_CHAIN = 128
 #: Fixed phase-function parameters at which the tints are also predicted (is isotropic
 #: scattering the cause of the tint errors?).
 G_SENSITIVITY = (0.3, 0.6)
+#: Prior sd of the cards' albedo factors in the posteriors (paper section 3.4: up to ~10 %).
+POSTERIOR_SUBSTRATE_SD = 0.1
 #: Band at which the per-film table quotes the posterior of ``a`` and ``tau`` [nm].
 SUMMARY_WAVELENGTH_NM = 550.0
 
@@ -243,6 +245,8 @@ class FilmCheck:
         Bool per wavelength: ``p < PPC_LEVEL``, the model cannot reproduce the film there.
     a_band, tau_band : tuple
         ``(median, q05, q95)`` of ``a`` and ``tau`` at :data:`SUMMARY_WAVELENGTH_NM`.
+    factors : tuple
+        With card factors: ``(median, q05, q95)`` of each card's albedo factor, black card first.
     """
 
     film_id: str
@@ -251,6 +255,7 @@ class FilmCheck:
     flagged: np.ndarray
     a_band: tuple
     tau_band: tuple
+    factors: tuple = ()  # per card (black "_b", then white "_w"): (median, low, high) of the albedo factor
 
     @property
     def flagged_wavelengths(self):
@@ -266,7 +271,10 @@ def film_check(film_id, idata):
     i = int(np.argmin(np.abs(wl - SUMMARY_WAVELENGTH_NM)))
     bands = [tuple(float(v) for v in np.quantile(q.posterior_draws(idata, name)[:, i], [0.5, 0.05, 0.95]))
              for name in ("a", "tau")]
-    return FilmCheck(film_id, wl, check["p_value"], check["flagged"], bands[0], bands[1])
+    # the Revigo cards are "<id>_b" and "<id>_w": by name, the dark card comes first
+    factors = sorted(q.card_factors(idata), key=lambda f: f["card"])
+    return FilmCheck(film_id, wl, check["p_value"], check["flagged"], bands[0], bands[1],
+                     tuple((f["median"], f["low"], f["high"]) for f in factors))
 
 
 @dataclass(frozen=True)
@@ -287,7 +295,8 @@ class RevigoStudy:
 
 
 def revigo_study(path=None, *, specular="auto", films=None, series=None, progress=None, posterior=False,
-                 posterior_eps=POSTERIOR_EPS, n_draws=200, seed=0, executor=None, g_sensitivity=G_SENSITIVITY):
+                 posterior_eps=POSTERIOR_EPS, n_draws=200, seed=0, executor=None, g_sensitivity=G_SENSITIVITY,
+                 substrate_sd=POSTERIOR_SUBSTRATE_SD, substrate_films=None):
     """Fit the Revigo films under SCE and SCI, decide, and predict every tint series with both models.
 
     Parameters
@@ -317,6 +326,14 @@ def revigo_study(path=None, *, specular="auto", films=None, series=None, progres
         Seeds the posteriors and the choice of draws.
     executor : concurrent.futures.Executor, optional
         For :func:`bayespig.inference.infer` (default: its local pool).
+    substrate_sd : float or None
+        Prior sd of ``log f`` of every card's albedo factor in the posteriors
+        (:func:`bayespig.inference.infer` ``substrate_sd``; 0 or None: the converted cards are
+        fixed inputs).
+    substrate_films : sequence of str or "white-rich", optional
+        Sample the card factors for these films only (the others with fixed cards); ``"white-rich"``:
+        the white film and every 10/90 tint B. Default: every film. A joint run over all
+        wavelengths takes about 1-4 minutes per film, a fixed-card one about 5 s.
     g_sensitivity : sequence of float
         Also predict the tints with bayespig at these fixed Henyey-Greenstein ``g`` (all films;
         the ``8d-sce`` table with a ``g`` axis, built on first use); SCE only.
@@ -395,13 +412,17 @@ def revigo_study(path=None, *, specular="auto", films=None, series=None, progres
         from .tints import cross_validated_model_error
 
         needed = list(dict.fromkeys(ids + [f for s in series for f in (s.masstone, s.white, s.tint_b)]))
-        idata = _film_posteriors(needed, sets, posterior_eps, seed, executor, say)
+        if substrate_films == "white-rich":
+            substrate_films = [series[0].white] + [x.tint_b for x in series] if series else []
+        idata = _film_posteriors(needed, path, chosen, posterior_eps, seed, executor, say, substrate_sd,
+                                 substrate_films)
         checks = {film_id: film_check(film_id, idata[film_id]) for film_id in ids}
         posteriors_c = _tint_posteriors(series, sets, idata, tint_models[0], n_draws, seed)
         if len(posteriors_c) >= 3:
             model_error = cross_validated_model_error(posteriors_c, probability=0.9, seed=seed)
     settings = {"path": str(path), "specular": chosen, "specular_requested": specular,
                 "posterior": ({"eps": posterior_eps, "n_draws": n_draws, "seed": seed, "method": "method4",
+                               "substrate_sd": substrate_sd, "substrate_films": substrate_films,
                                "credible_probability": 0.9} if posterior else None),
                 "fit": repr(models[chosen].settings), "table_keys": [m.table.key for m in models.values()],
                 "kubelka_munk": {"k1": tint_models[1].k1, "k2": tint_models[1].k2}}
@@ -415,16 +436,60 @@ def revigo_study(path=None, *, specular="auto", films=None, series=None, progres
                        posteriors_c, model_error, checks)
 
 
-def _film_posteriors(film_ids, sets, eps, seed, executor, say):
-    """``bayespig.infer`` (method 4, known ``eps``) of every film: film id -> InferenceData."""
+class _InlineExecutor:
+    """An executor that runs each task at once in the calling process (no nested pools)."""
+
+    def submit(self, fn, *args, **kwargs):
+        from concurrent.futures import Future
+
+        future = Future()
+        future.set_result(fn(*args, **kwargs))
+        return future
+
+
+#: The Revigo collections read in a worker process, keyed by (path, specular).
+_WORKER_SETS = {}
+
+
+def _film_posterior(path, specular, film_id, eps, seed, substrate_sd):
+    """One film's posterior (runs in a worker process; the samples do not depend on where)."""
+    import warnings
+
+    from ..data.spectral_table import read_revigo
     from ..inference import InferenceSettings, infer
 
+    key = (str(path), specular)
+    if key not in _WORKER_SETS:
+        _WORKER_SETS[key] = read_revigo(path, specular=specular)
+    ms = _WORKER_SETS[key][film_id]
+
     settings = InferenceSettings(target_ess=POSTERIOR_TARGET_ESS, draws_per_chain=POSTERIOR_DRAWS_PER_CHAIN)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        idata = infer(ms, method="method4", eps=eps, seed=seed, progress=False, settings=settings,
+                      executor=_InlineExecutor(), substrate_sd=substrate_sd or None)
+    return idata, [str(w.message) for w in caught]
+
+
+def _film_posteriors(film_ids, path, specular, eps, seed, executor, say, substrate_sd=None, substrate_films=None):
+    """``bayespig.infer`` (method 4, known ``eps``, with card factors for ``substrate_films``, all
+    when None) of every film, films in parallel (``executor``, default 2 processes): film id ->
+    InferenceData."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    own = executor is None
+    pool = ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) if own else executor
     idata = {}
-    for film_id in film_ids:
-        idata[film_id] = infer(sets[film_id], method="method4", eps=eps, seed=seed, progress=False,
-                               settings=settings, executor=executor)
-        say(f"posterior of {film_id}")
+    try:
+        with_factors = set(film_ids if substrate_films is None else substrate_films)
+        futures = {f: pool.submit(_film_posterior, path, specular, f, eps, seed,
+                                  substrate_sd if f in with_factors else None) for f in film_ids}
+        for film_id, future in futures.items():
+            idata[film_id], caught = future.result()
+            say(f"posterior of {film_id}" + (f" ({'; '.join(caught)})" if caught else ""))
+    finally:
+        if own:
+            pool.shutdown()
     return idata
 
 
@@ -520,6 +585,52 @@ def _section(title, *paragraphs):
     return ["", f"## {title}", ""] + [line for p in paragraphs for line in (p, "")]
 
 
+def _substrate_factor_summary(study):
+    """What the posteriors say about the cards' albedo factors (data-driven)."""
+    checks = {f: c for f, c in (study.checks or {}).items() if c.factors}
+    sd = ((study.settings.get("posterior") or {}).get("substrate_sd"))
+    if not checks or not sd:
+        return ("The posteriors of this run take the converted cards as fixed inputs (no `--posterior`, or "
+                "`--substrate-sd 0`); `bayespig infer --substrate-sd 0.1` treats them as uncertain.")
+    prior_low, prior_high = np.exp(np.array([-1.0, 1.0]) * 1.6448536269514722 * sd)
+    prior_width = prior_high - prior_low
+    widths = np.array([[f[2] - f[1] for f in c.factors] for c in checks.values()])
+    medians = np.array([[f[0] for f in c.factors] for c in checks.values()])
+    excludes_one = [(film, card) for film, c in checks.items() for card, f in zip(("black", "white"), c.factors)
+                    if not f[1] <= 1.0 <= f[2]]
+    narrowed = (widths < 0.5 * prior_width).sum(axis=0)
+    fixed = len(study.checks) - len(checks)
+    return (f"The posteriors of {len(checks)} films ({', '.join(sorted(checks))}) treat the cards as uncertain"
+            + (f" (the other {fixed} take the converted cards as fixed inputs: a joint run takes minutes per film)"
+               if fixed else "")
+            + f" (`bayespig.infer(..., substrate_sd={sd:g})`, `bayespig.substrate_nuisance`): r_s = f r_s,card with one factor per card and film at all "
+            f"wavelengths, log f ~ N(0, {sd:g}²) (90 % prior interval [{prior_low:.3f}, {prior_high:.3f}]), "
+            "sampled jointly over the wavelengths; the per-film table gives each factor's posterior. On these "
+            "8°/d films the factors are weakly identified, as expected with one value per card and wavelength "
+            "(every feasible factor fits both spectra exactly): the median 90 % interval is "
+            f"{np.median(widths[:, 0]):.3f} wide for the black card and {np.median(widths[:, 1]):.3f} for the "
+            f"white (prior {prior_width:.3f}); narrower than half the prior's for {narrowed[0]} black and "
+            f"{narrowed[1]} white cards of {len(checks)} films, which happens where a factor would make the "
+            "film infeasible (the white card of dark or white-rich films). Median factors over the films: "
+            f"black {np.median(medians[:, 0]):.3f}, white {np.median(medians[:, 1]):.3f}. The 90 % interval "
+            f"excludes 1 for {len(excludes_one)} cards"
+            + (f" ({', '.join(f'{film} {card}' for film, card in excludes_one[:12])}"
+               + (", ..." if len(excludes_one) > 12 else "") + ")" if excludes_one else "")
+            + ". The card uncertainty widens the posteriors of a and tau of these films and so the tint "
+            "regions below.")
+
+
+def _substrate_option(posterior):
+    """The ``revigo`` options that reproduce a run's card-factor settings."""
+    if not posterior:
+        return ""
+    sd, films = posterior.get("substrate_sd"), posterior.get("substrate_films")
+    text = "" if sd == POSTERIOR_SUBSTRATE_SD else f" --substrate-sd {sd or 0:g}"
+    if sd and films is not None:
+        text += f" --substrate-films {films if isinstance(films, str) else ','.join(films)}"
+    return text
+
+
 def _band_text(band):
     median, low, high = band
     return f"{median:.3g} [{low:.3g}, {high:.3g}]"
@@ -593,7 +704,8 @@ def revigo_report(study):
         "# Revigo films: black/white fits, SCE vs SCI, tint prediction vs Kubelka–Munk",
         "",
         ("Regenerate with `bayespig revigo --report reports/revigo.md"
-         + (" --posterior" if posterior else "") + "` (data: `../shared/data/revigo`, Geldof et al. "
+         + (" --posterior" if posterior else "") + _substrate_option(posterior)
+         + "` (data: `../shared/data/revigo`, Geldof et al. "
          "2018, CC0). Generated "
          f"{datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')} with {_versions()}."),
         "",
@@ -647,8 +759,8 @@ def revigo_report(study):
     lines.append("| film | composition | SCE median / max rms | SCE misfit bands (inverted) | "
                  "SCI median / max rms | SCI misfit bands |"
                  + (" posterior check: bands with p < 0.01 [nm] | a at 550 nm, median [90 %] | "
-                    "tau at 550 nm, median [90 %] |" if checks else ""))
-    lines.append("|---|---|---|---|---|---|" + ("---|---|---|" if checks else ""))
+                    "tau at 550 nm, median [90 %] | card factors black / white, median [90 %] |" if checks else ""))
+    lines.append("|---|---|---|---|---|---|" + ("---|---|---|---|" if checks else ""))
     for film_id in study.fits["excluded"]:
         f_e, f_i = study.fits["excluded"][film_id], study.fits["included"][film_id]
         row = (f"| {film_id} | {(study.compositions or {}).get(film_id, '')} | "
@@ -658,9 +770,10 @@ def revigo_report(study):
         if film_id in checks:
             c = checks[film_id]
             flagged = ", ".join(f"{w:g}" for w in c.flagged_wavelengths) or "none"
-            row += (f" {flagged} | {_band_text(c.a_band)} | {_band_text(c.tau_band)} |")
+            factors = " / ".join(_band_text(f) for f in c.factors) or "fixed"
+            row += (f" {flagged} | {_band_text(c.a_band)} | {_band_text(c.tau_band)} | {factors} |")
         elif checks:
-            row += " — | — | — |"
+            row += " — | — | — | — |"
         lines.append(row)
     if study.card_in_air:
         lines += _section(
@@ -673,17 +786,7 @@ def revigo_report(study):
                   "|---|---|---|---|"]
         for film_id, (converted, air, air_max) in study.card_in_air.items():
             lines.append(f"| {film_id} | {converted} | {air} | {100 * air_max:.1f} % |")
-        lines += [
-            "",
-            ("Substrate factors as nuisance parameters (`bayespig.substrate_nuisance`, one factor per "
-             "card and film, log-normal prior with 10 % sd) are implemented and tested on simulated "
-             "multi-angle data, where they recover a known card factor. On these 8°/d films they "
-             "are not identifiable: with one value per card and wavelength every factor in the "
-             "feasible range fits exactly, so the posterior is the prior; and the inverted bands "
-             "push it to absurd values (e.g. 04B: black card ×4.9, white ×0.28, making the black "
-             "card the brighter) — a symptom of the data, not a card property. They are therefore "
-             "not used for the tints below."),
-        ]
+        lines += ["", _substrate_factor_summary(study)]
     lines += _section(
         "Tint prediction: the ~50/50 tint C from masstone A, zinc white 07A and the 10/90 tint B",
         (f"Instrument hypothesis: {'SCE' if study.specular == 'excluded' else 'SCI'}. Protocol "

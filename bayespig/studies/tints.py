@@ -489,24 +489,28 @@ def credible_region_contains(draws, point, probability=0.9):
 
 
 def _posterior_draws(idata, n_draws, rng):
-    """``a``, ``tau`` draws (n_draws, n_wavelengths), sampled independently per wavelength."""
+    """``a``, ``tau`` draws (n_draws, n_wavelengths): whole spectra, draw ``k`` at every wavelength.
+
+    Draw ``k`` of every wavelength is a draw from the joint posterior of the spectrum, both when
+    the wavelengths were sampled independently and when a card factor couples them
+    (``infer(..., substrate_sd=...)``).
+    """
     a = idata.posterior["a"].values  # (chain, draw, wavelength)
     tau = idata.posterior["tau"].values
     flat_a = a.reshape(-1, a.shape[-1])
     flat_tau = tau.reshape(-1, tau.shape[-1])
-    pick = rng.integers(0, flat_a.shape[0], size=(n_draws, flat_a.shape[1]))
-    columns = np.arange(flat_a.shape[1])
-    return flat_a[pick, columns], flat_tau[pick, columns]
+    pick = rng.integers(0, flat_a.shape[0], size=n_draws)
+    return flat_a[pick], flat_tau[pick]
 
 
 def tint_posterior_predictive(model, posteriors, *, tint_c, concentrations_b, concentrations_c,
                               white_concentration=1.0, n_draws=200, probability=0.9, seed=0):
     """Posterior predictive of tint C over both cards from posteriors of A, W and B (bayespig).
 
-    Each draw takes ``a`` and ``tau`` of the masstone, the white and tint B from their
-    posteriors (:func:`bayespig.inference.infer`, method 4; wavelengths are independent a
-    posteriori, so draws are combined independently per wavelength), runs steps 2-4 of the
-    protocol, and refits C's thickness (the one free scalar) on C's spectra.
+    Each draw takes a whole spectrum of ``a`` and ``tau`` of the masstone, the white and tint B
+    from their posteriors (:func:`bayespig.inference.infer`, method 4, with or without card
+    factors), runs steps 2-4 of the protocol, and refits C's thickness (the one free scalar)
+    on C's spectra.
 
     Parameters
     ----------

@@ -137,7 +137,7 @@ def test_report_states_the_model_checks_and_the_phase_function_medians():
     checks = {"01A": FilmCheck("01A", wl, np.array([0.4, 0.003, 0.5]), np.array([False, True, False]),
                                (0.5, 0.49, 0.51), (2.4, 2.3, 2.5)),
               "07A": FilmCheck("07A", wl, np.full(3, 0.5), np.zeros(3, bool), (0.001, 0.0, 0.002),
-                               (100.0, 30.0, 127.0))}
+                               (100.0, 30.0, 127.0), ((1.01, 0.87, 1.19), (1.05, 1.02, 1.08)))}
     series = [TintSeries(f"0{i}", "Pigment", f"0{i}A", "07A", f"0{i}B", f"0{i}C", (0.1, 0.9), (0.5, 0.5))
               for i in range(1, 4)]
     tints = {}
@@ -147,8 +147,18 @@ def test_report_states_the_model_checks_and_the_phase_function_medians():
         tints[(s.series, "kubelka-munk")] = _prediction("kubelka-munk", [1, 1])
     study = RevigoStudy(fits, specular_evidence(fits), "excluded", series, tints,
                         {"specular_requested": "auto", "kubelka_munk": {"k1": 0.034, "k2": 0.56},
-                         "posterior": {"eps": 0.01, "n_draws": 10, "seed": 0}}, checks=checks)
+                         "posterior": {"eps": 0.01, "n_draws": 10, "seed": 0, "substrate_sd": 0.1,
+                                       "substrate_films": ["07A"]}},
+                        card_in_air={"07A": (0, 23, 0.043)}, checks=checks)
     text = revigo_report(study)
+    # card factors: per film in the table, summarised from the same numbers
+    assert "| 1.01 [0.87, 1.19] / 1.05 [1.02, 1.08] |" in text
+    assert "| fixed |" in text  # 01A was run with fixed cards
+    assert "The posteriors of 1 films (07A) treat the cards as uncertain (the other 1 take" in text
+    assert "the median 90 % interval is 0.320 wide for the black card and 0.060 for the white (prior 0.330)" in text
+    assert "narrower than half the prior's for 0 black and 1 white cards of 1 films" in text
+    assert "excludes 1 for 1 cards (07A white)" in text
+    assert "--substrate-films 07A" in text
     assert "**Flagged: 1 of 6 bands, in 1 of 2 films (01A)**; inverted bands among the flagged: 1." in text
     assert "| 550 | 0.5 [0.49, 0.51] | 2.4 [2.3, 2.5] |" in text
     assert "| none | 0.001 [0, 0.002] | 100 [30, 127] |" in text
