@@ -285,6 +285,37 @@ def _pick(c, index):
     return c[np.arange(c.shape[0])[:, None], index]
 
 
+def ensemble_halves(n_total, n_ensembles, random, blocks=None, owner="a move"):
+    """The red-blue split of every ensemble's walkers, at random (Foreman-Mackey et al. 2013).
+
+    Parameters
+    ----------
+    n_total : int
+        Walkers of all ensembles (contiguous blocks of equal width).
+    n_ensembles : int
+    random : numpy.random.RandomState
+        emcee's random state.
+    blocks : numpy.ndarray of int, optional
+        The ensembles to split (default all).
+    owner : str
+        Named in the error.
+
+    Returns
+    -------
+    tuple
+        ``((first, second), (second, first))``: walker indices (n_blocks, width / 2) of the half
+        that moves and of the half its proposals come from, for the two half-steps.
+    """
+    width = n_total // n_ensembles
+    half = width // 2
+    if width * n_ensembles != n_total or width % 2 or half < 3:
+        raise RuntimeError(f"{owner} needs an even number (>= 6) of walkers per ensemble")
+    blocks = np.arange(n_ensembles) if blocks is None else blocks
+    order = np.argsort(random.rand(blocks.size, width), axis=1)
+    order += (blocks * width)[:, None]
+    return (order[:, :half], order[:, half:]), (order[:, half:], order[:, :half])
+
+
 class IndependentEnsemblesMove:
     """emcee ensemble moves applied to ``n_ensembles`` disjoint, contiguous blocks of walkers.
 
@@ -390,18 +421,12 @@ class IndependentEnsemblesMove:
     def propose(self, model, state):
         """One red-blue update of every walker of every ensemble (emcee's Move interface)."""
         n_total, n_dim = state.coords.shape
-        width = n_total // self.n_ensembles
-        half = width // 2
-        if width * self.n_ensembles != n_total or width % 2 or half < 3:
-            raise RuntimeError("IndependentEnsemblesMove needs an even number (>= 6) of walkers per ensemble")
         random = model.random
         blocks = np.arange(self.n_ensembles)
         if self.frozen is not None:
             blocks = blocks[~np.asarray(self.frozen, dtype=bool)]
-        order = np.argsort(random.rand(blocks.size, width), axis=1)
-        order += (blocks * width)[:, None]
         accepted = np.zeros(n_total, dtype=bool)
-        for active, other in ((order[:, :half], order[:, half:]), (order[:, half:], order[:, :half])):
+        for active, other in ensemble_halves(n_total, self.n_ensembles, random, blocks, type(self).__name__):
             q, factor = self._proposal(state.coords[active], state.coords[other], random)
             q = q.reshape(-1, n_dim)
             index = active.reshape(-1)

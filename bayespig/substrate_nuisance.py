@@ -347,18 +347,14 @@ class ConditionalBlocksMove:
 
     def propose(self, model, state):
         """One red-blue update of every walker of every ensemble (emcee's Move interface)."""
+        from .inference import ensemble_halves
+
         lp = self.log_post
         n_total, n_dim = state.coords.shape
-        width = n_total // self.n_ensembles
-        half = width // 2
-        if width * self.n_ensembles != n_total or width % 2 or half < 3:
-            raise RuntimeError("ConditionalBlocksMove needs an even number (>= 6) of walkers per ensemble")
         random = model.random
-        order = np.argsort(random.rand(self.n_ensembles, width), axis=1)
-        order += (np.arange(self.n_ensembles) * width)[:, None]
         accepted = np.zeros(n_total, dtype=bool)
         factor_columns = np.arange(lp.factor_slice.start, lp.factor_slice.stop)
-        for active, other in ((order[:, :half], order[:, half:]), (order[:, half:], order[:, :half])):
+        for active, other in ensemble_halves(n_total, self.n_ensembles, random, owner=type(self).__name__):
             s, c = state.coords[active], state.coords[other]
             index = active.reshape(-1)
             current = s.reshape(-1, n_dim)
