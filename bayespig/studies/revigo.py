@@ -247,6 +247,10 @@ class FilmCheck:
         ``(median, q05, q95)`` of ``a`` and ``tau`` at :data:`SUMMARY_WAVELENGTH_NM`.
     factors : tuple
         With card factors: ``(median, q05, q95)`` of each card's albedo factor, black card first.
+    capped : bool
+        The sampler stopped at its step cap (``ConvergenceWarning``): intervals are approximate.
+    factor_rhat : float
+        Largest rank-normalised R-hat of the factors (NaN without card factors).
     """
 
     film_id: str
@@ -256,6 +260,8 @@ class FilmCheck:
     a_band: tuple
     tau_band: tuple
     factors: tuple = ()  # per card (black "_b", then white "_w"): (median, low, high) of the albedo factor
+    capped: bool = False  # the run reached its step cap before its length criterion
+    factor_rhat: float = float("nan")  # largest R-hat of the factors (arviz), with card factors
 
     @property
     def flagged_wavelengths(self):
@@ -264,6 +270,8 @@ class FilmCheck:
 
 def film_check(film_id, idata):
     """:class:`FilmCheck` of one film's posterior (``idata`` from :func:`bayespig.infer`)."""
+    import arviz as az
+
     from ..report import quantities as q
 
     check = q.posterior_predictive_check(idata)
@@ -273,8 +281,10 @@ def film_check(film_id, idata):
              for name in ("a", "tau")]
     # the Revigo cards are "<id>_b" and "<id>_w": by name, the dark card comes first
     factors = sorted(q.card_factors(idata), key=lambda f: f["card"])
+    capped = bool(np.asarray(idata.sample_stats["max_steps_reached"].values).any())
+    rhat = (float(az.rhat(idata.posterior["r_s_factor"]).to_array().max()) if factors else float("nan"))
     return FilmCheck(film_id, wl, check["p_value"], check["flagged"], bands[0], bands[1],
-                     tuple((f["median"], f["low"], f["high"]) for f in factors))
+                     tuple((f["median"], f["low"], f["high"]) for f in factors), capped, rhat)
 
 
 @dataclass(frozen=True)
@@ -599,6 +609,8 @@ def _substrate_factor_summary(study):
     excludes_one = [(film, card) for film, c in checks.items() for card, f in zip(("black", "white"), c.factors)
                     if not f[1] <= 1.0 <= f[2]]
     narrowed = (widths < 0.5 * prior_width).sum(axis=0)
+    capped = sorted(f for f, c in checks.items() if c.capped)
+    rhat = max(c.factor_rhat for c in checks.values())
     fixed = len(study.checks) - len(checks)
     return (f"The posteriors of {len(checks)} films ({', '.join(sorted(checks))}) treat the cards as uncertain"
             + (f" (the other {fixed} take the converted cards as fixed inputs: a joint run takes minutes per film)"
@@ -617,7 +629,12 @@ def _substrate_factor_summary(study):
             + (f" ({', '.join(f'{film} {card}' for film, card in excludes_one[:12])}"
                + (", ..." if len(excludes_one) > 12 else "") + ")" if excludes_one else "")
             + ". The card uncertainty widens the posteriors of a and tau of these films and so the tint "
-            "regions below.")
+            "regions below. "
+            + (f"**{len(capped)} of these {len(checks)} joint runs stopped at the step cap** ({', '.join(capped)}; "
+               "marked in the table): the factors mix slowly where the data bound them (a white card that "
+               "cannot be brighter without making the film infeasible), so their intervals are approximate; "
+               f"the largest R-hat of a factor is {rhat:.3f}." if capped else
+               f"Every joint run met its length criterion; the largest R-hat of a factor is {rhat:.3f}."))
 
 
 def _substrate_option(posterior):
@@ -770,7 +787,7 @@ def revigo_report(study):
         if film_id in checks:
             c = checks[film_id]
             flagged = ", ".join(f"{w:g}" for w in c.flagged_wavelengths) or "none"
-            factors = " / ".join(_band_text(f) for f in c.factors) or "fixed"
+            factors = (" / ".join(_band_text(f) for f in c.factors) or "fixed") + (" (capped)" if c.capped else "")
             row += (f" {flagged} | {_band_text(c.a_band)} | {_band_text(c.tau_band)} | {factors} |")
         elif checks:
             row += " — | — | — | — |"

@@ -137,7 +137,7 @@ def test_report_states_the_model_checks_and_the_phase_function_medians():
     checks = {"01A": FilmCheck("01A", wl, np.array([0.4, 0.003, 0.5]), np.array([False, True, False]),
                                (0.5, 0.49, 0.51), (2.4, 2.3, 2.5)),
               "07A": FilmCheck("07A", wl, np.full(3, 0.5), np.zeros(3, bool), (0.001, 0.0, 0.002),
-                               (100.0, 30.0, 127.0), ((1.01, 0.87, 1.19), (1.05, 1.02, 1.08)))}
+                               (100.0, 30.0, 127.0), ((1.01, 0.87, 1.19), (1.05, 1.02, 1.08)), True, 1.004)}
     series = [TintSeries(f"0{i}", "Pigment", f"0{i}A", "07A", f"0{i}B", f"0{i}C", (0.1, 0.9), (0.5, 0.5))
               for i in range(1, 4)]
     tints = {}
@@ -152,7 +152,9 @@ def test_report_states_the_model_checks_and_the_phase_function_medians():
                         card_in_air={"07A": (0, 23, 0.043)}, checks=checks)
     text = revigo_report(study)
     # card factors: per film in the table, summarised from the same numbers
-    assert "| 1.01 [0.87, 1.19] / 1.05 [1.02, 1.08] |" in text
+    assert "| 1.01 [0.87, 1.19] / 1.05 [1.02, 1.08] (capped) |" in text
+    assert "**1 of these 1 joint runs stopped at the step cap** (07A;" in text
+    assert "the largest R-hat of a factor is 1.004." in text
     assert "| fixed |" in text  # 01A was run with fixed cards
     assert "The posteriors of 1 films (07A) treat the cards as uncertain (the other 1 take" in text
     assert "the median 90 % interval is 0.320 wide for the black card and 0.060 for the white (prior 0.330)" in text
