@@ -26,8 +26,10 @@ from bayespig.likelihood import Priors
 #: probability ~7e-6 per comparison for a correct sampler).
 MC_Z = 4.5
 #: Posterior sd vs the frequentist RMS of the point fits where the posterior is well
-#: identified (issue 6: within a factor 1.5).
-SD_RMS_FACTOR = 1.5
+#: identified. Issue 6 asks for a factor 1.5, but that band would pass an eps wrong by 40 %;
+#: the sampling errors are ~5 % (an rms over 200 replicates, 1/sqrt(400)) and ~3 % (the mean
+#: posterior sd of four bands), so 1.2 is ~4 combined sd (measured: 0.96 for a, 1.00 for tau).
+SD_RMS_FACTOR = 1.2
 #: The paper's ravine (issue 6): method 3's corr(a, log tau) above this ...
 RAVINE_CORRELATION = 0.5
 #: ... and its tau spread this many times method 4's for the same film.

@@ -75,7 +75,7 @@ def test_joint_log_posterior_in_residual_coordinates_is_the_direct_one():
     np.testing.assert_allclose(post(u), expected, rtol=1e-10)
     # a card brighter than r_s = 1 is outside the support
     u_out = u[:1].copy()
-    u_out[0, -1] = np.log(1.02 / STATED_WHITE) * 0 + np.log(1.3)
+    u_out[0, -1] = np.log(1.3)  # white card 0.8 * 1.3 = 1.04
     assert post(u_out)[0] == -np.inf
     with pytest.raises(ValueError, match="card_index"):
         CardFactorLogPosterior(model, index[:1], theta_hat)
