@@ -1,0 +1,123 @@
+"""The shared argument checks of bayespig._validation: one TypeError/ValueError naming the argument."""
+
+import math
+
+import numpy as np
+import pytest
+
+from bayespig._validation import (
+    DEFAULT_TAU_MIN,
+    broadcast,
+    choice,
+    integer,
+    real_array,
+    real_scalar,
+    seed,
+)
+from bayespig.table import TableSettings
+
+
+def test_default_tau_min_is_the_tables_first_node():
+    # _validation cannot import bayespig.table (the table uses these checks): the copy must agree
+    assert DEFAULT_TAU_MIN == TableSettings().tau_nodes[0]
+
+
+@pytest.mark.parametrize(
+    "value, error, message",
+    [
+        ("1.45", TypeError, "n must be a number or an array of numbers, got '1.45' (str)"),
+        (None, TypeError, "n must be a number or an array of numbers, got None (NoneType)"),
+        (True, TypeError, "n must be a number or an array of numbers, not booleans: got True (bool)"),
+        (1 + 2j, TypeError, "n must be a number or an array of numbers, not complex numbers"),
+        (math.nan, ValueError, "n must not contain NaN"),
+        (math.inf, ValueError, "n must be finite, got inf (float)"),
+        (0.5, ValueError, "n must be >= 1, got 0.5"),
+        ([1.5, 1.6], TypeError, "n must be a single number, got [1.5, 1.6] (list)"),
+    ],
+)
+def test_real_scalar_refusals(value, error, message):
+    with pytest.raises(error) as excinfo:
+        real_scalar("n", value, low=1.0)
+    assert str(excinfo.value).startswith(message)
+
+
+def test_real_scalar_accepts_numbers():
+    assert real_scalar("n", 1.45, low=1.0) == 1.45
+    assert real_scalar("n", np.float32(2.0), low=1.0) == 2.0
+    assert real_scalar("n", 3, low=1.0) == 3.0
+    assert real_scalar("tau", math.inf, low=0.0, allow_inf=True) == math.inf
+
+
+def test_real_array_bounds_and_shapes():
+    with pytest.raises(ValueError, match=r"^a must be in \[0, 1\], got values from -0.1 to 0.5$"):
+        real_array("a", [-0.1, 0.5], low=0.0, high=1.0)
+    with pytest.raises(ValueError, match=r"^eps must be in \(0, 1\), got 0$"):
+        real_array("eps", 0.0, low=0.0, high=1.0, low_open=True, high_open=True)
+    with pytest.raises(ValueError, match=r"^wavelength_nm must have 1 dimension\(s\), got shape \(\)$"):
+        real_array("wavelength_nm", 500.0, ndim=1)
+    with pytest.raises(TypeError, match=r"^a must be a number or a regular array of numbers"):
+        real_array("a", [[0.1, 0.2], [0.3]])
+    with pytest.raises(TypeError, match=r"^a must be a number or an array of numbers, not strings: got \[0.1, 'x'\]"):
+        real_array("a", [0.1, "x"])
+    np.testing.assert_array_equal(real_array("a", [0, 1]), [0.0, 1.0])
+
+
+@pytest.mark.parametrize(
+    "value, error, message",
+    [
+        (2.5, TypeError, "n_points must be an integer, got 2.5 (float)"),
+        (3.0, TypeError, "n_points must be an integer, got 3.0 (float)"),
+        (True, TypeError, "n_points must be an integer, not a boolean: got True"),
+        ("4", TypeError, "n_points must be an integer, got '4' (str)"),
+        (None, TypeError, "n_points must be an integer, got None (NoneType)"),
+        (0, ValueError, "n_points must be an integer >= 1, got 0"),
+    ],
+)
+def test_integer_refusals(value, error, message):
+    with pytest.raises(error) as excinfo:
+        integer("n_points", value, low=1)
+    assert str(excinfo.value) == message
+
+
+def test_integer_accepts_numpy_integers():
+    assert integer("n_points", np.int64(4), low=1) == 4
+
+
+@pytest.mark.parametrize(
+    "value, error, message",
+    [
+        (True, TypeError, "seed must be None or an integer >= 0, got True (bool)"),
+        (1.0, TypeError, "seed must be None or an integer >= 0, got 1.0 (float)"),
+        ("1", TypeError, "seed must be None or an integer >= 0, got '1' (str)"),
+        (-1, ValueError, "seed must be an integer >= 0, got -1"),
+    ],
+)
+def test_seed_refusals(value, error, message):
+    with pytest.raises(error) as excinfo:
+        seed(value)
+    assert str(excinfo.value) == message
+
+
+def test_seed_accepts():
+    assert seed(None) is None
+    assert seed(np.int32(7)) == 7
+    generator = np.random.default_rng(1)
+    assert seed(generator) is generator
+
+
+def test_choice_lists_the_options():
+    with pytest.raises(ValueError) as excinfo:
+        choice("executor", "x", ("serial", "process"))
+    assert str(excinfo.value) == "executor must be one of 'serial', 'process', got 'x' (str)"
+    with pytest.raises(ValueError, match="^executor must be one of"):
+        choice("executor", [1], {"serial"})  # unhashable
+
+
+def test_broadcast_names_the_arguments():
+    with pytest.raises(ValueError) as excinfo:
+        broadcast(a=np.zeros(3), tau=np.zeros(2))
+    assert str(excinfo.value) == (
+        "the shapes of a (3,), tau (2,) do not broadcast together (numpy broadcasting rules)"
+    )
+    a, tau = broadcast(a=np.zeros(3), tau=1.0)
+    assert tau.shape == (3,)
