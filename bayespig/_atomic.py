@@ -1,13 +1,96 @@
-"""Atomic file output: every file bayespig writes appears whole or not at all."""
+"""Atomic file output: every file bayespig writes appears whole or not at all.
+
+Every file is written under a temporary name beside its destination and moved into place
+with :func:`os.replace` once complete. Temporary names say whose they are::
+
+    .<name>.bayespig-tmp-<host>-<pid>-<random><suffix>      (one file, :func:`atomic_path`)
+    .staging.bayespig-tmp-<host>-<pid>-<random>             (a file set, :func:`write_file_set`)
+
+A process that is killed outright (``SIGKILL``, power loss) cannot remove its temporary file,
+so at most one such file per interrupted write is left behind; the next atomic write into the
+same folder removes every bayespig temporary whose process (same host, by process id) no
+longer runs (:func:`remove_stale_temporaries`). Temporaries of running processes and of other
+hosts (a shared folder) are left alone.
+"""
 
 from __future__ import annotations
 
 import os
+import re
+import shutil
+import socket
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_path", "write_file_set", "write_text_atomically"]
+__all__ = ["atomic_path", "remove_stale_temporaries", "write_file_set", "write_text_atomically"]
+
+#: Marker in the name of every temporary file or folder written by this module.
+TEMPORARY_MARKER = "bayespig-tmp"
+_TEMPORARY_NAME = re.compile(rf"^\..*\.{TEMPORARY_MARKER}-(?P<host>[A-Za-z0-9]*)-(?P<pid>[0-9]+)-")
+
+
+def _host_tag():
+    """This machine's name reduced to letters and digits (at most 16), for temporary names."""
+    return re.sub(r"[^A-Za-z0-9]", "", socket.gethostname())[:16]
+
+
+def _temporary_prefix(name):
+    """Prefix of a temporary for ``name``: hidden, marked, with this host and process id."""
+    return f".{name}.{TEMPORARY_MARKER}-{_host_tag()}-{os.getpid()}-"
+
+
+def _process_running(pid):
+    """Whether a process with this id runs on this machine (``True`` when it cannot be told)."""
+    if pid == os.getpid():
+        return True
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):  # another user's process, or no signal 0 (Windows)
+        return True
+    return True
+
+
+def remove_stale_temporaries(folder):
+    """Remove the bayespig temporaries in ``folder`` whose writing process no longer runs.
+
+    Only names of the form written by this module are considered (see the module notes); a
+    temporary of a running process or of another host is kept. Errors (a file that vanishes
+    meanwhile, a folder that cannot be listed) are ignored: cleaning is a courtesy.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        The folder to clean (not recursed into).
+
+    Returns
+    -------
+    list of pathlib.Path
+        The temporaries removed.
+    """
+    removed = []
+    host = _host_tag()
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for entry in entries:
+        match = _TEMPORARY_NAME.match(entry.name)
+        if match is None or match["host"] != host or _process_running(int(match["pid"])):
+            continue
+        try:
+            if entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(entry.path)
+            else:
+                os.unlink(entry.path)
+        except OSError:
+            continue
+        removed.append(Path(entry.path))
+    return removed
 
 
 def _umask():
@@ -40,7 +123,8 @@ def atomic_path(path, *, suffix=".tmp"):
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
+    remove_stale_temporaries(path.parent)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=_temporary_prefix(path.name), suffix=suffix)
     os.close(fd)
     tmp = Path(tmp)
     try:
@@ -66,7 +150,8 @@ def write_file_set(out_dir, files):
     Every file is first written into a temporary folder inside ``out_dir``; only when all
     exist are they moved into place with :func:`os.replace`, in the order given (put the
     pages that link the others last). On any error the temporary folder is removed and
-    ``out_dir`` keeps what it had.
+    ``out_dir`` keeps what it had. Stale temporaries of killed processes in ``out_dir`` are
+    removed first (:func:`remove_stale_temporaries`).
 
     Parameters
     ----------
@@ -81,11 +166,10 @@ def write_file_set(out_dir, files):
     dict
         Relative path -> final :class:`pathlib.Path`, in the order of ``files``.
     """
-    import shutil
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=".staging-", dir=out_dir))
+    remove_stale_temporaries(out_dir)
+    staging = Path(tempfile.mkdtemp(prefix=_temporary_prefix("staging"), dir=out_dir))
     try:
         for relative, content in files.items():
             target = staging / relative

@@ -120,4 +120,4 @@ def test_broadcast_names_the_arguments():
         "the shapes of a (3,), tau (2,) do not broadcast together (numpy broadcasting rules)"
     )
     a, tau = broadcast(a=np.zeros(3), tau=1.0)
-    assert tau.shape == (3,)
+    assert a.shape == tau.shape == (3,)
