@@ -26,10 +26,21 @@ import hashlib
 import json
 import os
 import sys
+import time
 import warnings
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+
+try:  # POSIX
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None
+try:  # Windows
+    import msvcrt
+except ImportError:
+    msvcrt = None
 
 import numpy as np
 
@@ -49,7 +60,15 @@ from .physics.fresnel import fresnel_reflectance
 from .physics.phase import normalise_on_quadrature, phase_fourier_modes
 from .physics.quadrature import DEFAULT_QUADRATURE_POINTS
 
-__all__ = ["LookupTable", "TableSettings", "build_table", "cache_directory", "load_table"]
+__all__ = [
+    "CacheError",
+    "CacheLocationError",
+    "LookupTable",
+    "TableSettings",
+    "build_table",
+    "cache_directory",
+    "load_table",
+]
 
 #: Bump when the file layout or the tabulated quantities change.
 FORMAT_VERSION = 2
@@ -847,6 +866,117 @@ class CacheError(ValueError):
     """A cached table file is truncated, corrupt or built with other settings."""
 
 
+class CacheLocationError(OSError):
+    """The table cache cannot be used where it is (a file where a folder should be, no access)."""
+
+
+#: Seconds between attempts to take a build lock where only polling is possible (Windows).
+LOCK_POLL_INTERVAL = 0.5
+
+
+def _cache_origin(cache_dir):
+    """Where the cache folder came from, and what to do when it cannot be used (plain words)."""
+    if cache_dir:
+        return "given as cache_dir", "pass a folder as cache_dir"
+    if os.environ.get("BAYESPIG_CACHE"):
+        default = Path(os.environ.get("XDG_CACHE_HOME") or (Path.home() / ".cache")) / "bayespig"
+        return "set by BAYESPIG_CACHE", (
+            f"set BAYESPIG_CACHE to a folder you can write, or unset it to use '{default}'"
+        )
+    return "the default", "set BAYESPIG_CACHE to a folder you can write"
+
+
+def _cache_folder(cache_dir):
+    """The cache folder (created if missing), or :class:`CacheLocationError` in plain words."""
+    folder = Path(cache_dir) if cache_dir else cache_directory()
+    if folder.exists() and not folder.is_dir():
+        origin, remedy = _cache_origin(cache_dir)
+        raise CacheLocationError(f"the table cache folder '{folder}' ({origin}) is a file, not a folder: {remedy}")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        origin, remedy = _cache_origin(cache_dir)
+        raise CacheLocationError(
+            f"the table cache folder '{folder}' ({origin}) cannot be created ({error.strerror}): {remedy}"
+        ) from None
+    return folder
+
+
+def _lock_path(path):
+    """Lock file of a table's build: ``.table-<key>.npz.lock`` beside the table (kept afterwards)."""
+    return path.with_name(f".{path.name}.lock")
+
+
+def _try_lock(handle):
+    """Take an exclusive lock on an open file without waiting; whether it was taken."""
+    try:
+        if fcntl is not None:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        else:  # pragma: no cover - Windows
+            msvcrt.locking(handle.fileno(), msvcrt.LK_NBLCK, 1)
+    except BlockingIOError:
+        return False
+    except OSError:  # pragma: no cover - Windows reports a held lock as EACCES or EDEADLK
+        if fcntl is None:
+            return False
+        raise
+    return True
+
+
+def _wait_for_lock(handle):
+    """Take an exclusive lock on an open file, waiting as long as another process holds it."""
+    if fcntl is not None:
+        fcntl.flock(handle.fileno(), fcntl.LOCK_EX)
+        return
+    while not _try_lock(handle):  # pragma: no cover - Windows
+        time.sleep(LOCK_POLL_INTERVAL)
+
+
+@contextmanager
+def _build_lock(path, instrument_name, progress):
+    """Hold the build lock of the table at ``path`` (one builder per table across processes).
+
+    A second process asking for the same table waits here (saying so when ``progress``) until
+    the first has written it, then finds it in the cache. Where no file locking is available
+    (neither ``fcntl`` nor ``msvcrt``) or the lock file cannot be created (a read-only cache),
+    builds proceed unlocked, as before.
+
+    Yields
+    ------
+    bool
+        Whether this process had to wait for another one.
+    """
+    handle = None
+    if fcntl is not None or msvcrt is not None:
+        try:
+            handle = open(_lock_path(path), "a+b")  # noqa: SIM115 - closed below
+        except OSError:
+            pass
+    if handle is None:
+        yield False
+        return
+    with handle:
+        waited = False
+        if not _try_lock(handle):
+            waited = True
+            if progress:
+                print(
+                    f"bayespig: waiting for another process building table {instrument_name} "
+                    f"({path.name})",
+                    file=sys.stderr,
+                    flush=True,
+                )
+            _wait_for_lock(handle)
+        try:
+            yield waited
+        finally:
+            if fcntl is not None:
+                fcntl.flock(handle.fileno(), fcntl.LOCK_UN)
+            else:  # pragma: no cover - Windows
+                handle.seek(0)
+                msvcrt.locking(handle.fileno(), msvcrt.LK_UNLCK, 1)
+
+
 def read_table(path, instrument, settings):
     """Read a cached table, verifying its key and checksum; raise :class:`CacheError` otherwise."""
     instrument = get_instrument(instrument)
@@ -868,6 +998,20 @@ def read_table(path, instrument, settings):
     return LookupTable(instrument, settings, arrays, key)
 
 
+def _table_title(instrument):
+    """An instrument's name for messages (its channels when it has no name of its own)."""
+    return "+".join(instrument.labels) if instrument.name == "custom" else instrument.name
+
+
+def _read_cached(path, instrument, settings):
+    """The cached table at ``path``, or ``None`` after a warning that it is damaged."""
+    try:
+        return read_table(path, instrument, settings)
+    except CacheError as error:
+        warnings.warn(f"{error}; rebuilding it", RuntimeWarning, stacklevel=3)
+        return None
+
+
 def load_table(instrument, *, g="isotropic", n=1.45, settings=None, cache_dir=None, rebuild=False,
                progress=True, executor=None):
     """The cached look-up table of an instrument, built on first use.
@@ -885,7 +1029,7 @@ def load_table(instrument, *, g="isotropic", n=1.45, settings=None, cache_dir=No
     settings : TableSettings, optional
         Overrides the default axes.
     cache_dir : path, optional
-        Defaults to :func:`cache_directory` (``$BAYESPIG_CACHE``).
+        Defaults to :func:`cache_directory` (``$BAYESPIG_CACHE``); created if missing.
     rebuild : bool
         Ignore any cached file.
     progress : bool
@@ -896,6 +1040,20 @@ def load_table(instrument, *, g="isotropic", n=1.45, settings=None, cache_dir=No
     Returns
     -------
     LookupTable
+
+    Raises
+    ------
+    CacheLocationError
+        The cache folder is a file or cannot be created, or the table's file name is taken
+        by a folder; the message names the path and what to do.
+
+    Notes
+    -----
+    A damaged cached file is reported (``RuntimeWarning``) and rebuilt. One process builds a
+    given table at a time: the build holds an exclusive lock on ``.table-<key>.npz.lock``
+    beside the table (``fcntl.flock``; ``msvcrt`` on Windows), and a second process asking for
+    the same table says "waiting for another process building table ..." (when ``progress``),
+    waits, and then loads the table the first one wrote. The lock file stays in the cache.
     """
     if g not in ("isotropic", "free"):
         raise ValueError(f"g must be 'isotropic' or 'free', got {g!r}")
@@ -910,12 +1068,29 @@ def load_table(instrument, *, g="isotropic", n=1.45, settings=None, cache_dir=No
     elif g == "free" and settings.g_range is None:
         raise ValueError("g='free' needs settings with a g_range")
     key = table_key(instrument, settings)
-    path = table_path(key, cache_dir)
+    path = table_path(key, _cache_folder(cache_dir))
+    if path.is_dir():
+        raise CacheLocationError(
+            f"the cached table '{path}' is a folder, not a file: remove or rename that folder "
+            "(bayespig writes the table there)"
+        )
     if path.exists() and not rebuild:
-        try:
-            return read_table(path, instrument, settings)
-        except CacheError as error:
-            warnings.warn(f"{error}; rebuilding it", RuntimeWarning, stacklevel=2)
-    table = build_table(instrument, settings, executor=executor, progress=progress)
-    save_table(table, path)
+        table = _read_cached(path, instrument, settings)
+        if table is not None:
+            return table
+        rebuild = True  # the damaged file must not be read again below
+    with _build_lock(path, _table_title(instrument), progress) as waited:
+        # built by the process waited for, or by another between the first look and the lock
+        if (waited or not rebuild) and path.is_file():
+            table = _read_cached(path, instrument, settings)
+            if table is not None:
+                return table
+        if not os.access(path.parent, os.W_OK | os.X_OK):
+            origin, remedy = _cache_origin(cache_dir)
+            raise CacheLocationError(
+                f"table {_table_title(instrument)} is not cached and cannot be built: the table cache folder "
+                f"'{path.parent}' ({origin}) is not writable: {remedy}"
+            )
+        table = build_table(instrument, settings, executor=executor, progress=progress)
+        save_table(table, path)
     return table

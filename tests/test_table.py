@@ -13,7 +13,10 @@ checked in the ``slow`` tests).
 """
 
 import dataclasses
+import os
 import pickle
+import subprocess
+import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -21,6 +24,7 @@ import numpy as np
 import pytest
 
 import bayespig
+import bayespig.table as table_module
 from bayespig import cli
 from bayespig._validation import DEFAULT_TAU_MIN, domain_points
 from bayespig.instruments import (
@@ -34,6 +38,7 @@ from bayespig.instruments import (
 from bayespig.physics.forward import surface_terms
 from bayespig.table import (
     CacheError,
+    CacheLocationError,
     LookupTable,
     TableSettings,
     build_table,
@@ -678,6 +683,121 @@ def test_cache_directory_follows_the_environment(tmp_path, monkeypatch):
     table = load_table(list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, progress=False)
     assert table_path(table.key).parent == tmp_path / "moved"
     assert table_path(table.key).is_file()
+
+
+def test_cache_folder_that_is_a_file_is_named_before_any_build(tmp_path, monkeypatch):
+    a_file = tmp_path / "afile"
+    a_file.write_text("")
+    monkeypatch.setattr(table_module, "build_table", _no_build)
+    monkeypatch.setenv("BAYESPIG_CACHE", str(a_file))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    with pytest.raises(CacheLocationError) as excinfo:
+        load_table(list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, progress=False)
+    assert str(excinfo.value) == (
+        f"the table cache folder '{a_file}' (set by BAYESPIG_CACHE) is a file, not a folder: "
+        f"set BAYESPIG_CACHE to a folder you can write, or unset it to use '{tmp_path / 'xdg' / 'bayespig'}'"
+    )
+    monkeypatch.setenv("BAYESPIG_CACHE", str(a_file / "sub"))
+    with pytest.raises(CacheLocationError, match=r"^the table cache folder '.*afile/sub' \(set by "
+                       r"BAYESPIG_CACHE\) cannot be created \(Not a directory\): set BAYESPIG_CACHE"):
+        load_table(list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, progress=False)
+    with pytest.raises(CacheLocationError) as excinfo:
+        load_table(list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, progress=False, cache_dir=a_file)
+    assert str(excinfo.value) == (
+        f"the table cache folder '{a_file}' (given as cache_dir) is a file, not a folder: "
+        "pass a folder as cache_dir"
+    )
+    assert isinstance(excinfo.value, OSError)  # bayespig.cli reports OSError in one line
+
+
+def _no_build(*args, **kwargs):
+    raise AssertionError("a table was built")
+
+
+def test_table_file_name_taken_by_a_folder(tmp_path, monkeypatch):
+    key = table_key(get_instrument(list(SMALL_INSTRUMENT)), SMALL_SETTINGS)
+    folder = table_path(key, tmp_path)
+    folder.mkdir()
+    monkeypatch.setattr(table_module, "build_table", _no_build)
+    with pytest.raises(CacheLocationError) as excinfo:
+        load_table(list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, progress=False, cache_dir=tmp_path)
+    assert str(excinfo.value) == (
+        f"the cached table '{folder}' is a folder, not a file: remove or rename that folder "
+        "(bayespig writes the table there)"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == [folder.name]  # no temporary left
+
+
+def test_unwritable_cache_folder_is_said_before_the_build(tmp_path, monkeypatch):
+    # (as root every folder is writable, so the permission test is simulated)
+    monkeypatch.setattr(table_module.os, "access", lambda path, mode: False)
+    monkeypatch.setattr(table_module, "build_table", _no_build)
+    with pytest.raises(CacheLocationError) as excinfo:
+        load_table(list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, progress=False, cache_dir=tmp_path)
+    assert str(excinfo.value) == (
+        "table 45as15+45as110 is not cached and cannot be built: the table cache folder "
+        f"'{tmp_path}' (given as cache_dir) is not writable: pass a folder as cache_dir"
+    )
+
+
+#: Seconds a test waits for a child process's next line (generous: 2 shared, loaded cores).
+CHILD_LINE_TIMEOUT = 120.0
+
+_BUILDER = """
+import pathlib, sys, time
+import bayespig.table as table_module
+from bayespig.table import TableSettings, load_table
+
+cache, marker, release = map(pathlib.Path, sys.argv[1:4])
+real_build = table_module.build_table
+
+def counted_build(*args, **kwargs):
+    with open(marker, "a") as handle:
+        handle.write("built\\n")
+    print("building", flush=True)
+    deadline = time.monotonic() + 120
+    while not release.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return real_build(*args, **kwargs)
+
+table_module.build_table = counted_build
+settings = TableSettings(n_a=12, log2_tau_min=-4, log2_tau_max=4, per_octave=2)
+table = load_table(["45as15", "45as110"], settings=settings, cache_dir=cache, progress=True)
+print("loaded", table.key, flush=True)
+"""
+
+
+def _read_line(stream):
+    """The child's next line, within CHILD_LINE_TIMEOUT (a reader thread keeps the test from hanging)."""
+    with ThreadPoolExecutor(1) as pool:
+        return pool.submit(stream.readline).result(timeout=CHILD_LINE_TIMEOUT).decode()
+
+
+def test_concurrent_builders_build_once(tmp_path):
+    cache, marker, release = tmp_path / "cache", tmp_path / "builds.log", tmp_path / "release"
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    command = [sys.executable, "-c", _BUILDER, str(cache), str(marker), str(release)]
+    first = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    second = None
+    try:
+        assert _read_line(first.stdout) == "building\n"
+        second = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+        waiting = _read_line(second.stderr)
+        key = table_key(get_instrument(list(SMALL_INSTRUMENT)), SMALL_SETTINGS)
+        assert waiting == (
+            f"bayespig: waiting for another process building table 45as15+45as110 (table-{key}.npz)\n"
+        )
+        release.touch()  # the first builder may finish now
+        outputs = [p.communicate(timeout=CHILD_LINE_TIMEOUT) for p in (first, second)]
+        assert [p.returncode for p in (first, second)] == [0, 0], outputs
+    finally:
+        for process in (first, second):
+            if process is not None:
+                process.kill()
+                process.wait()
+    assert marker.read_text() == "built\n", "the table was built more than once"
+    assert outputs[0][0].decode() == f"loaded {key}\n" == outputs[1][0].decode()
+    assert sorted(p.name for p in cache.iterdir()) == [f".table-{key}.npz.lock", f"table-{key}.npz"]
 
 
 # --- command line ---------------------------------------------------------------------------
