@@ -99,7 +99,7 @@ def _bounds_text(low, high, low_open, high_open):
 
 
 def real_array(name, value, *, low=None, high=None, low_open=False, high_open=False, allow_inf=False,
-               ndim=None, unit=""):
+               ndim=None, unit="", _noun="a number"):
     """``value`` as a float array, or a ``TypeError``/``ValueError`` naming ``name``.
 
     Refused: ``None``, strings, booleans, complex or non-numeric entries, ragged nesting, NaN,
@@ -129,7 +129,7 @@ def real_array(name, value, *, low=None, high=None, low_open=False, high_open=Fa
         The values as ``float``.
     """
     if value is None or isinstance(value, (str, bytes)):
-        raise TypeError(f"{name} must be a number or an array of numbers, got {_describe(value)}")
+        raise TypeError(f"{name} must be {_noun} or an array of numbers, got {_describe(value)}")
     try:
         arr = np.asarray(value)
     except ValueError:  # ragged nesting
@@ -141,15 +141,15 @@ def real_array(name, value, *, low=None, high=None, low_open=False, high_open=Fa
                 arr = np.asarray(value, dtype=float)
             except (TypeError, ValueError):
                 raise TypeError(
-                    f"{name} must be a number or an array of numbers, got {_describe(value)}"
+                    f"{name} must be {_noun} or an array of numbers, got {_describe(value)}"
                 ) from None
         else:
-            raise TypeError(f"{name} must be a number or an array of numbers, not {what}: got {_describe(value)}")
+            raise TypeError(f"{name} must be {_noun} or an array of numbers, not {what}: got {_describe(value)}")
     arr = np.asarray(arr, dtype=float)
     if ndim is not None and arr.ndim != ndim:
         raise ValueError(f"{name} must have {ndim} dimension(s), got shape {arr.shape}")
     if np.isnan(arr).any():
-        raise ValueError(f"{name} must not contain NaN")
+        raise ValueError(f"{name} must not {'be' if arr.ndim == 0 else 'contain'} NaN")
     if not allow_inf and np.isinf(arr).any():
         raise ValueError(f"{name} must be finite, got {_describe(value)}")
     too_low = low is not None and ((arr <= low) if low_open else (arr < low)).any()
@@ -172,10 +172,12 @@ def real_scalar(name, value, *, low=None, high=None, low_open=False, high_open=F
     -------
     float
     """
-    if value is not None and not isinstance(value, (str, bytes)) and np.ndim(value) != 0:
+    if value is None or isinstance(value, (str, bytes, bool, np.bool_, complex)):
+        raise TypeError(f"{name} must be a number, got {_describe(value)}")
+    if np.ndim(value) != 0:
         raise TypeError(f"{name} must be a single number, got {_describe(value)}")
     arr = real_array(name, value, low=low, high=high, low_open=low_open, high_open=high_open,
-                     allow_inf=allow_inf, unit=unit)
+                     allow_inf=allow_inf, unit=unit, _noun="a number, not an array")
     return float(arr)
 
 

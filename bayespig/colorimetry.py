@@ -48,6 +48,8 @@ import numpy as np
 from colour.colorimetry import MSDS_CMFS_STANDARD_OBSERVER
 from colour.utilities import ColourRuntimeWarning, ColourUsageWarning
 
+from ._validation import real_array
+
 __all__ = [
     "DEFAULT_ILLUMINANT",
     "DEFAULT_OBSERVER",
@@ -98,7 +100,7 @@ def _resolve_name(name, valid, argument):
 
 
 def _check_wavelengths(wavelength_nm):
-    wl = np.asarray(wavelength_nm, dtype=float)
+    wl = real_array("wavelength_nm", wavelength_nm, allow_inf=True)  # inf: refused below
     if wl.ndim != 1 or wl.size < MIN_WAVELENGTHS:
         raise ValueError(
             f"wavelength_nm must be a 1-D array of at least {MIN_WAVELENGTHS} wavelengths "
@@ -223,7 +225,7 @@ def colorimetric_metadata(
 
 
 def _check_reflectance(reflectance, n_wavelengths):
-    R = np.asarray(reflectance, dtype=float)
+    R = real_array("reflectance", reflectance, allow_inf=True)  # inf: refused below
     if R.ndim == 0 or R.shape[-1] != n_wavelengths:
         raise ValueError(
             f"reflectance has shape {R.shape}; its last axis must match the "
@@ -294,7 +296,7 @@ def white_point_XYZ(
 
 
 def _check_triplets(values, argument):
-    v = np.asarray(values, dtype=float)
+    v = real_array(argument, values, allow_inf=True)  # inf: refused below
     if v.ndim == 0 or v.shape[-1] != 3:
         raise ValueError(f"{argument} must have a last axis of length 3, got shape {v.shape}")
     if np.isnan(v).any() or np.isinf(v).any():

@@ -49,6 +49,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._validation import choice, real_array, real_scalar
+from .instruments import get_instrument
 from .likelihood import FilmTerm, Problem
 from .physics.forward import specular_transmittance
 from .physics.fresnel import normal_transmittance
@@ -893,16 +895,24 @@ def fit_batch(films, groups, *, method, g=0.0, tables=None, settings=None, n=1.4
     FitResult
         ``wavelength_nm`` holds the row index.
     """
+    if settings is not None and not isinstance(settings, FitSettings):
+        raise TypeError(f"settings must be a FitSettings or None, got {settings!r} ({type(settings).__name__})")
     settings = settings or FitSettings()
-    if method not in TWO_STEP_METHODS + _JOINT_METHODS:
+    if not isinstance(method, str) or method not in TWO_STEP_METHODS + _JOINT_METHODS:
         raise ValueError(
             f"method must be one of {', '.join(TWO_STEP_METHODS + _JOINT_METHODS)}, got {method!r}"
         )
     search = isinstance(g, str)
     if search and g != "search":
         raise ValueError(f"g must be a number or 'search', got {g!r}")
-    if not search and not np.isfinite(g):
-        raise ValueError(f"g must be finite, got {g!r}")
+    if not search:
+        try:
+            g = real_scalar("g", g, low=-1.0, high=1.0, low_open=True, high_open=True)
+        except TypeError:
+            raise TypeError(f"g must be a number or 'search', got {g!r} ({type(g).__name__})") from None
+    n = real_scalar("n", n, low=1.0)
+    if tables is not None and not isinstance(tables, dict):
+        raise TypeError(f"tables must be a dict (instrument -> LookupTable) or None, got {type(tables).__name__}")
     films = tuple(films)
     groups = tuple(groups)
     if not films:
@@ -997,6 +1007,8 @@ def fit_problem(problem, *, g=0.0, tables=None, settings=None, warn=True):
         raise TypeError(
             f"problem must be a bayespig.likelihood.Problem, got {type(problem).__name__}"
         )
+    if not isinstance(warn, (bool, np.bool_)):
+        raise TypeError(f"warn must be True or False, got {warn!r} ({type(warn).__name__})")
     result = fit_batch(
         problem.films,
         problem.groups,
@@ -1028,6 +1040,34 @@ def _with_wavelengths(result, wavelength_nm):
 
 
 def film_term(name, *, observed, group=None, instrument=None, r_s=0.0, kind="reflectance"):
-    """A :class:`~bayespig.likelihood.FilmTerm` for batches built in code (replicates as rows)."""
-    observed = np.asarray(observed, dtype=float)
-    return FilmTerm(name, kind, instrument, group, np.full(observed.shape[0], float(r_s)), observed)
+    """A :class:`~bayespig.likelihood.FilmTerm` for batches built in code (replicates as rows).
+
+    Parameters
+    ----------
+    name : str
+        The film's name (in messages).
+    observed : array_like, shape (n_rows, n_values)
+        Measured values, one row per independent fit [1/sr or -].
+    group : str, optional
+        The film group sharing one ``tau``; ``None`` for an opaque film.
+    instrument : str, Instrument or sequence, optional
+        The instrument of reflectance films (see :func:`~bayespig.instruments.get_instrument`).
+    r_s : float
+        Substrate albedo seen from the binder, in [0, 1] [-].
+    kind : {"reflectance", "transmittance"}
+        What ``observed`` is.
+
+    Returns
+    -------
+    FilmTerm
+    """
+    if not isinstance(name, str):
+        raise TypeError(f"name must be a string, got {name!r} ({type(name).__name__})")
+    choice("kind", kind, ("reflectance", "transmittance"))
+    observed = real_array("observed", observed, ndim=2)
+    r_s = real_scalar("r_s", r_s, low=0.0, high=1.0)
+    if kind == "reflectance":
+        if instrument is None:
+            raise ValueError("instrument is needed for a reflectance film")
+        instrument = get_instrument(instrument)  # a clear error now rather than at the fit
+    return FilmTerm(name, kind, instrument, group, np.full(observed.shape[0], r_s), observed)

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._validation import broadcast, real_array, real_scalar
 from .physics.forward import surface_terms, validate_layer_arguments
 from .physics.fresnel import fresnel_reflectance
 from .physics.geometry import aspecular_to_geometry, geometry_label
@@ -116,8 +117,14 @@ def get_instrument(instrument, n=1.45):
     """
     from .physics.geometry import parse_geometry_label
 
+    n = real_scalar("n", n, low=1.0)
     if isinstance(instrument, Instrument):
         return instrument
+    if not isinstance(instrument, str) and not hasattr(instrument, "__iter__"):
+        raise TypeError(
+            "instrument must be a built-in name (" + ", ".join(BUILT_IN_INSTRUMENTS) + "), an "
+            f"Instrument or a list of geometries, got {instrument!r} ({type(instrument).__name__})"
+        )
     if isinstance(instrument, str):
         if instrument not in BUILT_IN_INSTRUMENTS:
             raise ValueError(
@@ -132,7 +139,13 @@ def get_instrument(instrument, n=1.45):
             theta_i, theta_o, delta_phi = parse_geometry_label(item)
             channels.append(Channel("brdf", theta_i, theta_o, delta_phi, None, item.strip()))
         else:
-            theta_i, theta_o, delta_phi = (float(x) for x in item)
+            try:
+                theta_i, theta_o, delta_phi = (real_scalar("instrument geometry", x) for x in item)
+            except (TypeError, ValueError):
+                raise TypeError(
+                    "instrument geometries must be labels such as '45as15', Channel objects or "
+                    f"(theta_i, theta_o, delta_phi) triples in degrees, got {item!r}"
+                ) from None
             channels.append(Channel("brdf", theta_i, theta_o, delta_phi, None, f"{theta_i:g}/{theta_o:g}/{delta_phi:g}"))
     if not channels:
         raise ValueError("an instrument needs at least one channel")
@@ -200,8 +213,11 @@ def predict(instrument, *, a, tau, g=0.0, r_s=0.0):
         Shape ``broadcast(a, tau, g, r_s).shape + (n_channels,)``.
     """
     instrument = get_instrument(instrument)
+    a, tau, g, r_s = (
+        real_array(name, value, allow_inf=True) for name, value in (("a", a), ("tau", tau), ("g", g), ("r_s", r_s))
+    )
     validate_layer_arguments(a=a, tau=tau, g=g, r_s=r_s, n=instrument.n)
-    a, tau, g, r_s = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (a, tau, g, r_s)))
+    a, tau, g, r_s = broadcast(a=a, tau=tau, g=g, r_s=r_s)
     shape = a.shape
     a, tau, g, r_s = (v.ravel() for v in (a, tau, g, r_s))
     theta_in, theta_out, _, _ = channel_directions(instrument)

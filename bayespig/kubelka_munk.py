@@ -74,6 +74,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import integrate
 
+from ._validation import broadcast, real_array, real_scalar
+
 __all__ = [
     "SAUNDERSON_K1",
     "SAUNDERSON_K2",
@@ -109,20 +111,12 @@ _CONSISTENCY_TOL = 1e-9  # rounding slack for the black/white consistency checks
 
 
 def _as_array(value, argument, *, low=None, high=None, allow_inf=False):
-    v = np.asarray(value, dtype=float)
-    if np.isnan(v).any():
-        raise ValueError(f"{argument} contains NaN")
-    if not allow_inf and np.isinf(v).any():
-        raise ValueError(f"{argument} contains infinite values")
-    if low is not None and (v < low).any():
-        raise ValueError(f"{argument} must be >= {low:g}, got minimum {v.min():.6g}")
-    if high is not None and (v > high).any():
-        raise ValueError(f"{argument} must be <= {high:g}, got maximum {v.max():.6g}")
-    return v
+    """``value`` as floats, or a TypeError/ValueError naming ``argument`` (NaN, bounds, types)."""
+    return real_array(argument, value, low=low, high=high, allow_inf=allow_inf)
 
 
 def _check_specular(specular):
-    if specular not in SPECULAR_MODES:
+    if not isinstance(specular, str) or specular not in SPECULAR_MODES:
         raise ValueError(
             f"specular={specular!r} is not valid; use one of {', '.join(map(repr, SPECULAR_MODES))}"
         )
@@ -207,7 +201,7 @@ def _layer_R0_T(K, S, thickness):
     K = _as_array(K, "K", low=0.0)
     S = _as_array(S, "S", low=0.0)
     X = _as_array(thickness, "thickness", low=0.0, allow_inf=True)
-    K, S, X = np.broadcast_arrays(K, S, X)
+    K, S, X = broadcast(K=K, S=S, thickness=X)
     opaque = np.isinf(X)
     if (opaque & (K == 0) & (S == 0)).any():
         raise ValueError("thickness=inf needs K + S > 0 (an empty infinite layer has no R_inf)")
@@ -256,6 +250,7 @@ def layer_reflectance(K, S, thickness=1.0, background_reflectance=0.0):
     """
     R0, T = _layer_R0_T(K, S, thickness)
     Rg = _as_array(background_reflectance, "background_reflectance", low=0.0, high=1.0)
+    R0, T, Rg = broadcast(K=R0, **{"S and thickness": T}, background_reflectance=Rg)
     # 1 - R0 Rg vanishes only for a non-absorbing opaque layer over a perfect white,
     # where T = 0 and the background term is 0.
     denominator = 1.0 - R0 * Rg
@@ -349,6 +344,7 @@ def saunderson_to_measured(internal_reflectance, k1=SAUNDERSON_K1, k2=SAUNDERSON
     _check_specular(specular)
     k1, k2 = _check_k1_k2(k1, k2)
     Ri = _as_array(internal_reflectance, "internal_reflectance", low=0.0, high=1.0)
+    Ri, k1, k2 = broadcast(internal_reflectance=Ri, k1=k1, k2=k2)
     diffuse = (1.0 - k1) * (1.0 - k2) * Ri / (1.0 - k2 * Ri)
     return diffuse + k1 if specular == "included" else diffuse
 
@@ -375,6 +371,7 @@ def saunderson_to_internal(measured_reflectance, k1=SAUNDERSON_K1, k2=SAUNDERSON
     _check_specular(specular)
     k1, k2 = _check_k1_k2(k1, k2)
     Rm = _as_array(measured_reflectance, "measured_reflectance", low=0.0, high=1.0)
+    Rm, k1, k2 = broadcast(measured_reflectance=Rm, k1=k1, k2=k2)
     diffuse = Rm - k1 if specular == "included" else Rm
     if (diffuse < 0).any():
         raise ValueError(
@@ -409,7 +406,7 @@ def saunderson_k1(refractive_index):
         ``k1`` [1]; 0.04 for ``n = 1.5``. For an 8/d instrument (8 degree incidence) the
         value differs by less than 1e-4.
     """
-    n = float(_as_array(refractive_index, "refractive_index"))
+    n = real_scalar("refractive_index", refractive_index)
     if n <= 0:
         raise ValueError("refractive_index must be > 0")
     return ((n - 1.0) / (n + 1.0)) ** 2
@@ -432,7 +429,7 @@ def saunderson_k2(refractive_index):
     float
         ``k2`` [1]; 0.596 for ``n = 1.5``, about 0.56 for ``n = 1.45``.
     """
-    n = float(_as_array(refractive_index, "refractive_index"))
+    n = real_scalar("refractive_index", refractive_index)
     if n < 1.0:
         raise ValueError("refractive_index must be >= 1 (binder denser than air)")
     mu_critical = np.sqrt(1.0 - 1.0 / n**2)
@@ -501,7 +498,9 @@ def ks_from_black_white(
     R2 = _as_array(reflectance_over_white, "reflectance_over_white", low=0.0, high=1.0)
     g1 = _as_array(background_black, "background_black", low=0.0, high=1.0)
     g2 = _as_array(background_white, "background_white", low=0.0, high=1.0)
-    R1, R2, g1, g2 = np.broadcast_arrays(R1, R2, g1, g2)
+    R1, R2, g1, g2 = broadcast(
+        reflectance_over_black=R1, reflectance_over_white=R2, background_black=g1, background_white=g2
+    )
     if (g2 <= g1).any():
         raise ValueError("background_white must be brighter than background_black")
     opaque = R1 >= R2  # the film hides the background (noise can invert the order)
@@ -572,10 +571,10 @@ def saunderson_constants(refractive_index=1.45, theta_i=8.0):
     """
     from .physics.fresnel import fresnel_reflectance
 
-    n = float(_as_array(refractive_index, "refractive_index"))
+    n = real_scalar("refractive_index", refractive_index)
     if n < 1.0:
         raise ValueError("refractive_index must be >= 1 (binder denser than air)")
-    theta = float(_as_array(theta_i, "theta_i"))
+    theta = real_scalar("theta_i", theta_i)
     if not 0.0 <= theta < 90.0:
         raise ValueError(f"theta_i must lie in [0, 90) degrees, got {theta:g}")
     k1 = float(fresnel_reflectance(np.cos(np.radians(theta)), 1.0, n))

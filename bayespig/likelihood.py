@@ -15,10 +15,12 @@ per wavelength are ``a`` (pigment), one ``tau`` per film group, optionally ``g``
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._validation import broadcast, real_array
 from .instruments import Instrument
 from .physics.forward import specular_transmittance
 
@@ -54,8 +56,14 @@ def multiplicative_normal_logpdf(observed, model, eps):
     numpy.ndarray
         ``log N(observed | model, (eps model)^2)``, broadcast.
     """
-    sigma = eps * model
-    return -0.5 * ((observed - model) / sigma) ** 2 - np.log(sigma) - 0.5 * _LOG_2PI
+    try:
+        sigma = eps * model
+        return -0.5 * ((observed - model) / sigma) ** 2 - np.log(sigma) - 0.5 * _LOG_2PI
+    except (TypeError, ValueError):  # checked only on failure: this runs in the sampler's loop
+        checked = {name: real_array(name, value) for name, value in
+                   (("observed", observed), ("model", model), ("eps", eps))}
+        broadcast(**checked)
+        raise
 
 
 @dataclass(frozen=True)
@@ -155,12 +163,18 @@ class Problem:
         -------
         Problem
         """
+        if not callable(getattr(measurements, "supported_methods", None)):
+            hint = " (read a file with bayespig.read_measurements first)" if isinstance(measurements, (str, os.PathLike)) else ""
+            raise TypeError(
+                "measurements must be a bayespig MeasurementSet, got "
+                f"{measurements!r} ({type(measurements).__name__}){hint}"
+            )
         if method == "auto":
             supported = measurements.supported_methods()
             method = next((m for m in METHODS if supported[m]), "general")
         if method == "general":
             subset = measurements
-        elif method in METHODS:
+        elif isinstance(method, str) and method in METHODS:
             subset = measurements.for_method(method)
         else:
             raise ValueError(f"method must be 'auto', 'general' or one of {', '.join(METHODS)}; got {method!r}")

@@ -46,6 +46,7 @@ import numpy as np
 
 from . import __version__
 from ._atomic import atomic_path
+from ._validation import choice, integer, real_scalar
 from .instruments import Instrument, channel_directions, get_instrument
 from .physics.adding_doubling import (
     MAX_OPAQUE_DOUBLINGS,
@@ -138,7 +139,15 @@ class TableSettings:
     start_thickness: float = START_THICKNESS
 
     def __post_init__(self):
-        if self.g_axis not in G_AXES:
+        integer("n_a", self.n_a, low=4)  # a cubic stencil needs four nodes
+        real_scalar("a_stretch", self.a_stretch, low=0.0, low_open=True)
+        integer("log2_tau_min", self.log2_tau_min)
+        integer("log2_tau_max", self.log2_tau_max, low=self.log2_tau_min + 1)
+        integer("per_octave", self.per_octave, low=1)
+        integer("n_g", self.n_g, low=1)
+        integer("n_points", self.n_points, low=1)
+        real_scalar("start_thickness", self.start_thickness, low=0.0, low_open=True)
+        if not isinstance(self.g_axis, str) or self.g_axis not in G_AXES:
             raise ValueError(f"g_axis must be one of {', '.join(G_AXES)}, got {self.g_axis!r}")
         if self.g_range is not None:
             try:
@@ -432,7 +441,8 @@ def _slice_cost(g):
 
 
 def _check_index(n):
-    if not np.isscalar(n) or not np.isfinite(n) or n < 1.0:
+    n = real_scalar("n", n, allow_inf=True)  # a TypeError for a string, None or a boolean
+    if not np.isfinite(n) or n < 1.0:
         raise ValueError(f"n (binder refractive index) must be a finite number >= 1, got {n!r}")
 
 
@@ -1055,9 +1065,17 @@ def load_table(instrument, *, g="isotropic", n=1.45, settings=None, cache_dir=No
     the same table says "waiting for another process building table ..." (when ``progress``),
     waits, and then loads the table the first one wrote. The lock file stays in the cache.
     """
-    if g not in ("isotropic", "free"):
-        raise ValueError(f"g must be 'isotropic' or 'free', got {g!r}")
+    choice("g", g, ("isotropic", "free"))
     _check_index(n)
+    if settings is not None and not isinstance(settings, TableSettings):
+        raise TypeError(f"settings must be a TableSettings or None, got {settings!r} ({type(settings).__name__})")
+    if cache_dir is not None and not isinstance(cache_dir, (str, os.PathLike)):
+        raise TypeError(f"cache_dir must be a folder path or None, got {cache_dir!r} ({type(cache_dir).__name__})")
+    for name, flag in (("rebuild", rebuild), ("progress", progress)):
+        if not isinstance(flag, (bool, np.bool_)):
+            raise TypeError(f"{name} must be True or False, got {flag!r} ({type(flag).__name__})")
+    if executor is not None and not callable(getattr(executor, "submit", None)):
+        raise TypeError(f"executor must be a concurrent.futures.Executor or None, got {executor!r}")
     if isinstance(instrument, Instrument):
         if instrument.n != n:
             instrument = dataclasses.replace(instrument, n=n)

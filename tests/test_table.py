@@ -514,7 +514,7 @@ def test_bad_instrument_and_options(cache_dir):
         match="unknown instrument 'no-such'; built-in instruments: " + ", ".join(BUILT_IN),
     ):
         load_table("no-such", cache_dir=cache_dir)
-    with pytest.raises(ValueError, match="g must be 'isotropic' or 'free'"):
+    with pytest.raises(ValueError, match="^g must be one of 'isotropic', 'free', got 'anisotropic' \\(str\\)$"):
         load_table("8d-sci", g="anisotropic", cache_dir=cache_dir)
     with pytest.raises(
         ValueError, match=r"n \(binder refractive index\) must be a finite number >= 1"

@@ -25,11 +25,12 @@ def test_default_tau_min_is_the_tables_first_node():
 @pytest.mark.parametrize(
     "value, error, message",
     [
-        ("1.45", TypeError, "n must be a number or an array of numbers, got '1.45' (str)"),
-        (None, TypeError, "n must be a number or an array of numbers, got None (NoneType)"),
-        (True, TypeError, "n must be a number or an array of numbers, not booleans: got True (bool)"),
-        (1 + 2j, TypeError, "n must be a number or an array of numbers, not complex numbers"),
-        (math.nan, ValueError, "n must not contain NaN"),
+        ("1.45", TypeError, "n must be a number, got '1.45' (str)"),
+        (None, TypeError, "n must be a number, got None (NoneType)"),
+        (True, TypeError, "n must be a number, got True (bool)"),
+        (1 + 2j, TypeError, "n must be a number, got (1+2j) (complex)"),
+        (np.array([1.5]), TypeError, "n must be a single number, got array("),
+        (math.nan, ValueError, "n must not be NaN"),
         (math.inf, ValueError, "n must be finite, got inf (float)"),
         (0.5, ValueError, "n must be >= 1, got 0.5"),
         ([1.5, 1.6], TypeError, "n must be a single number, got [1.5, 1.6] (list)"),
@@ -46,6 +47,15 @@ def test_real_scalar_accepts_numbers():
     assert real_scalar("n", np.float32(2.0), low=1.0) == 2.0
     assert real_scalar("n", 3, low=1.0) == 3.0
     assert real_scalar("tau", math.inf, low=0.0, allow_inf=True) == math.inf
+
+
+def test_real_array_refusals():
+    with pytest.raises(TypeError, match=r"^a must be a number or an array of numbers, got None"):
+        real_array("a", None)
+    with pytest.raises(TypeError, match=r"^a must be a number or an array of numbers, not booleans"):
+        real_array("a", [True, False])
+    with pytest.raises(ValueError, match=r"^a must not contain NaN$"):
+        real_array("a", [0.1, math.nan])
 
 
 def test_real_array_bounds_and_shapes():

@@ -39,6 +39,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._atomic import atomic_path, write_text_atomically
+from .._validation import choice, integer, real_scalar
+from ..instruments import get_instrument
 from ..likelihood import Priors, Problem
 
 __all__ = [
@@ -67,6 +69,11 @@ def _short_runs():
 
 #: Wavelengths labelling the replicates of the simulated set [nm] (any increasing values).
 _FIRST_LABEL_NM = 1000.0
+#: The designs simulation_based_calibration simulates and fits.
+_SBC_METHODS = ("method1", "method2", "method3", "method4")
+#: Largest relative error simulated: eq. (7) makes sense only well below this (the prior's
+#: upper end, Priors.eps_range) [-].
+_EPS_MAX = 0.5
 
 
 @dataclass(frozen=True)
@@ -172,7 +179,8 @@ def simulation_based_calibration(method="method4", *, n_replicates=200, n_draws=
     Parameters
     ----------
     method : {"method3", "method4", "method2", "method1"}
-        The design simulated and fitted (section 3).
+        The design simulated and fitted (section 3); ``4`` or ``"4"`` also mean
+        ``"method4"``.
     n_replicates : int
         Prior draws (issue 6: at least 200 for the report).
     n_draws : int
@@ -183,7 +191,7 @@ def simulation_based_calibration(method="method4", *, n_replicates=200, n_draws=
     seed : int
         Seeds the prior draws, the noise and every run.
     eps : float
-        Relative measurement error of eq. (7), known to the likelihood [-].
+        Relative measurement error of eq. (7), known to the likelihood, in (0, 0.5] [-].
     instrument : str
         Built-in instrument.
     settings : InferenceSettings, optional
@@ -199,9 +207,22 @@ def simulation_based_calibration(method="method4", *, n_replicates=200, n_draws=
     from ..inference import ConvergenceWarning, InferenceSettings, _versions, infer_problem
     from ..table import load_table
 
-    if n_replicates < 2:
-        raise ValueError(f"n_replicates must be >= 2, got {n_replicates}")
-    if n_draws < 1 or (n_draws + 1) % n_bins:
+    if isinstance(method, str) and method.isdigit() or isinstance(method, int) and not isinstance(method, bool):
+        method = f"method{method}"  # 4 and "4" as the command line spells them
+    choice("method", method, _SBC_METHODS)
+    n_replicates = integer("n_replicates", n_replicates, low=2)
+    n_draws = integer("n_draws", n_draws, low=1)
+    n_bins = integer("n_bins", n_bins, low=1)
+    seed = integer("seed", seed, low=0)
+    eps = real_scalar("eps", eps, low=0.0, high=_EPS_MAX, low_open=True)
+    if not isinstance(instrument, str):
+        raise TypeError(f"instrument must be a built-in instrument name, got {instrument!r} ({type(instrument).__name__})")
+    get_instrument(instrument)
+    if settings is not None and not isinstance(settings, InferenceSettings):
+        raise TypeError(f"settings must be an InferenceSettings or None, got {settings!r} ({type(settings).__name__})")
+    if not isinstance(progress, (bool, np.bool_)):
+        raise TypeError(f"progress must be True or False, got {progress!r} ({type(progress).__name__})")
+    if (n_draws + 1) % n_bins:
         raise ValueError(f"n_draws + 1 ({n_draws + 1}) must be a positive multiple of n_bins ({n_bins})")
     settings = InferenceSettings() if settings is None else settings
     priors = Priors()
