@@ -49,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validation import choice, real_array, real_scalar
+from ._validation import choice, integer, real_array, real_scalar
 from .instruments import get_instrument
 from .likelihood import FilmTerm, Problem
 from .physics.forward import specular_transmittance
@@ -140,30 +140,39 @@ class FitSettings:
     start: tuple | None = None
 
     def __post_init__(self):
-        lo, hi = self.tau_bounds
+        lo, hi = _pair("tau_bounds", self.tau_bounds)
         if not (np.isfinite(lo) and np.isfinite(hi) and 0.0 < lo < hi):
             raise ValueError(
                 f"tau_bounds must be finite with 0 < low < high, got {self.tau_bounds}"
             )
-        lo, hi = self.a_bounds
+        lo, hi = _pair("a_bounds", self.a_bounds)
         if not 0.0 <= lo < hi <= 1.0:
             raise ValueError(f"a_bounds must satisfy 0 <= low < high <= 1, got {self.a_bounds}")
-        if self.n_grid_a < 4 or self.n_grid_tau < 4:
-            raise ValueError("n_grid_a and n_grid_tau must be >= 4")
-        if self.max_starts < 1:
-            raise ValueError(f"max_starts must be >= 1, got {self.max_starts}")
-        if self.max_iterations < 1 or self.g_iterations < 0:
-            raise ValueError("max_iterations must be >= 1 and g_iterations >= 0")
+        integer("n_grid_a", self.n_grid_a, low=4)
+        integer("n_grid_tau", self.n_grid_tau, low=4)
+        integer("max_iterations", self.max_iterations, low=1)
+        integer("max_starts", self.max_starts, low=1)
+        integer("g_iterations", self.g_iterations, low=0)
+        real_scalar("step_tolerance", self.step_tolerance, low=0.0, low_open=True)
+        real_scalar("cost_tolerance", self.cost_tolerance, low=0.0, low_open=True)
         if self.start is not None:
-            a, tau = self.start
+            a, tau = _pair("start", self.start, allow_inf=True)
             if not (0.0 <= a <= 1.0 and 0.0 < tau < np.inf):
                 raise ValueError(
                     f"start must be (a, tau) with a in [0, 1] and finite tau > 0, got {self.start}"
                 )
-        if self.objective not in OBJECTIVES:
+        if not isinstance(self.objective, str) or self.objective not in OBJECTIVES:
             raise ValueError(
                 f"objective must be one of {', '.join(OBJECTIVES)}, got {self.objective!r}"
             )
+
+
+def _pair(name, value, allow_inf=False):
+    """``(low, high)`` of a setting as two floats, or a TypeError/ValueError naming it."""
+    pair = real_array(name, value, allow_inf=allow_inf)
+    if pair.shape != (2,):
+        raise ValueError(f"{name} must be a pair of numbers, got {value!r}")
+    return float(pair[0]), float(pair[1])
 
 
 class FitBoundWarning(UserWarning):

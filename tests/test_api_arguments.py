@@ -7,7 +7,7 @@ import pytest
 
 from bayespig import colorimetry as cm
 from bayespig import kubelka_munk as km
-from bayespig.fit import film_term, fit_batch, fit_measurements, fit_problem
+from bayespig.fit import FitSettings, film_term, fit_batch, fit_measurements, fit_problem
 from bayespig.instruments import get_instrument, predict
 from bayespig.likelihood import Problem, multiplicative_normal_logpdf
 from bayespig.studies.calibration import simulation_based_calibration
@@ -133,6 +133,14 @@ BAD_CALLS = {
     "fit_batch settings": (lambda: fit_batch([], (), method="method4", settings={}), TypeError, "settings must be a FitSettings or None"),
     "fit_batch tables": (lambda: fit_batch([], (), method="method4", tables=[]), TypeError, "tables must be a dict"),
     "fit_batch method None": (lambda: fit_batch([], (), method=None), ValueError, "method must be one of"),
+    "FitSettings tau_bounds str": (lambda: FitSettings(tau_bounds="x"), TypeError, "tau_bounds must be a number or an array"),
+    "FitSettings tau_bounds triple": (lambda: FitSettings(tau_bounds=(1, 2, 3)), ValueError, "tau_bounds must be a pair of numbers, got (1, 2, 3)"),
+    "FitSettings a_bounds None": (lambda: FitSettings(a_bounds=None), TypeError, "a_bounds must be"),
+    "FitSettings n_grid_a float": (lambda: FitSettings(n_grid_a=8.5), TypeError, "n_grid_a must be an integer, got 8.5"),
+    "FitSettings max_starts 0": (lambda: FitSettings(max_starts=0), ValueError, "max_starts must be an integer >= 1, got 0"),
+    "FitSettings step_tolerance str": (lambda: FitSettings(step_tolerance="1e-7"), TypeError, "step_tolerance must be a number"),
+    "FitSettings start str": (lambda: FitSettings(start="x"), TypeError, "start must be"),
+    "FitSettings objective None": (lambda: FitSettings(objective=None), ValueError, "objective must be one of"),
     # simulation-based calibration (all refused before any work)
     "sbc method": (lambda: simulation_based_calibration("x"), ValueError, "method must be one of 'method1', 'method2', 'method3', 'method4', got 'x'"),
     "sbc n_replicates str": (lambda: simulation_based_calibration(n_replicates="5"), TypeError, "n_replicates must be an integer, got '5' (str)"),
