@@ -46,7 +46,7 @@ import numpy as np
 
 from . import __version__
 from ._atomic import atomic_path
-from ._validation import choice, integer, real_scalar
+from ._validation import broadcast, choice, integer, real_array, real_scalar
 from .instruments import Instrument, channel_directions, get_instrument
 from .physics.adding_doubling import (
     MAX_OPAQUE_DOUBLINGS,
@@ -704,15 +704,25 @@ class LookupTable:
             ``d/dg`` of the same shape (``d/dtau`` is 0 for opaque films;
             ``d/da`` is infinite at ``a = 0`` exactly, where the dependence is ``sqrt(a)``).
         """
+        for name, value in (("a", a), ("tau", tau), ("g", g), ("r_s", r_s)):
+            if not isinstance(value, (np.ndarray, float, int)) or isinstance(value, bool):
+                try:
+                    real_array(name, value, allow_inf=True)  # a string, None, a boolean: named
+                except ValueError:  # NaN: said below in the table's words
+                    pass
         args = [np.asarray(v, dtype=float) for v in (a, tau, g, r_s)]
         if not self._valid(*args):
             self._check(*args)
         a, tau, g, r_s = args
         # the layer terms are interpolated once per (a, tau, g); r_s broadcasts afterwards
-        if a.shape == tau.shape == g.shape:
+        if a.shape == tau.shape == g.shape and (r_s.ndim == 0 or r_s.shape == a.shape):
             layer_shape = a.shape
             a, tau, g = a.ravel(), tau.ravel(), g.ravel()
         else:
+            try:
+                np.broadcast_shapes(a.shape, tau.shape, g.shape, r_s.shape)
+            except ValueError:
+                broadcast(a=a, tau=tau, g=g, r_s=r_s)  # raises, naming them and their shapes
             layer_shape = np.broadcast_shapes(a.shape, tau.shape, g.shape)
             a, tau, g = (np.broadcast_to(v, layer_shape).ravel() for v in (a, tau, g))
         g = g if self.n_g > 1 else None
