@@ -769,8 +769,11 @@ print("loaded", table.key, flush=True)
 
 def _read_line(stream):
     """The child's next line, within CHILD_LINE_TIMEOUT (a reader thread keeps the test from hanging)."""
-    with ThreadPoolExecutor(1) as pool:
+    pool = ThreadPoolExecutor(1)
+    try:
         return pool.submit(stream.readline).result(timeout=CHILD_LINE_TIMEOUT).decode()
+    finally:
+        pool.shutdown(wait=False)  # on a timeout the reader ends when the child is killed
 
 
 def test_concurrent_builders_build_once(tmp_path):
