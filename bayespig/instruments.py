@@ -54,9 +54,12 @@ class Channel:
         if self.kind not in CHANNEL_KINDS:
             raise ValueError(f"channel kind must be one of {CHANNEL_KINDS}, got {self.kind!r}")
         for name in ("theta_i", "theta_o"):
-            value = getattr(self, name)
+            value = real_scalar(name, getattr(self, name))
             if not 0.0 <= value < 90.0:
                 raise ValueError(f"{name} must lie in [0, 90) degrees, got {value}")
+        real_scalar("delta_phi", self.delta_phi)
+        if not isinstance(self.label, str):
+            raise TypeError(f"label must be a string, got {self.label!r} ({type(self.label).__name__})")
         if self.kind == "hemispherical" and self.specular not in ("excluded", "included"):
             raise ValueError("a hemispherical channel needs specular='excluded' or 'included'")
 

@@ -467,6 +467,8 @@ def build_table(instrument, settings=None, *, executor=None, progress=True):
     """
     instrument = get_instrument(instrument)
     _check_index(instrument.n)
+    if settings is not None and not isinstance(settings, TableSettings):
+        raise TypeError(f"settings must be a TableSettings or None, got {settings!r} ({type(settings).__name__})")
     settings = settings or TableSettings()
     g_nodes = settings.g_nodes
     own_executor = executor is None and g_nodes.size > 1

@@ -8,10 +8,10 @@ import pytest
 from bayespig import colorimetry as cm
 from bayespig import kubelka_munk as km
 from bayespig.fit import FitSettings, film_term, fit_batch, fit_measurements, fit_problem
-from bayespig.instruments import get_instrument, predict
+from bayespig.instruments import Channel, get_instrument, predict
 from bayespig.likelihood import Problem, multiplicative_normal_logpdf
 from bayespig.studies.calibration import simulation_based_calibration
-from bayespig.table import TableSettings, load_table
+from bayespig.table import TableSettings, build_table, load_table
 
 WAVELENGTHS_NM = np.arange(400.0, 701.0, 10.0)
 REFLECTANCE = np.full(WAVELENGTHS_NM.size, 0.5)
@@ -100,12 +100,17 @@ BAD_CALLS = {
     "get_instrument None": (lambda: get_instrument(None), TypeError, "instrument must be a built-in name (multi-angle-45,"),
     "get_instrument int": (lambda: get_instrument(4), TypeError, "instrument must be a built-in name"),
     "get_instrument bad triple": (lambda: get_instrument([(45, "x", 0)]), TypeError, "instrument geometries must be labels"),
+    "Channel theta_i str": (lambda: Channel("brdf", "45", 15.0), TypeError, "theta_i must be a number, got '45' (str)"),
+    "Channel theta_o None": (lambda: Channel("brdf", 45.0, None), TypeError, "theta_o must be a number, got None"),
+    "Channel delta_phi str": (lambda: Channel("brdf", 45.0, 15.0, "180"), TypeError, "delta_phi must be a number"),
+    "Channel label": (lambda: Channel("brdf", 45.0, 15.0, 180.0, None, 5), TypeError, "label must be a string, got 5 (int)"),
     "predict a str": (lambda: predict("8d-sci", a="0.1", tau=1.0), TypeError, "a must be a number or an array"),
     "predict a None": (lambda: predict("8d-sci", a=None, tau=1.0), TypeError, "a must be"),
     "predict tau None": (lambda: predict("8d-sci", a=0.1, tau=None), TypeError, "tau must be"),
     "predict shapes": (lambda: predict("8d-sci", a=np.full(3, 0.1), tau=np.ones(2)), ValueError, "the shapes of a (3,), tau (2,), g (), r_s ()"),
     "predict r_s shape": (lambda: predict("8d-sci", a=np.full(3, 0.1), tau=1.0, r_s=[0.1, 0.2]), ValueError, "the shapes of a (3,), tau (), g (), r_s (2,)"),
     # tables
+    "build_table settings": (lambda: build_table("8d-sci", settings={"n_a": 8}), TypeError, "settings must be a TableSettings or None, got {'n_a': 8} (dict)"),
     "load_table n str": (lambda: load_table("8d-sci", n="1.45"), TypeError, "n must be a number, got '1.45' (str)"),
     "load_table n None": (lambda: load_table("8d-sci", n=None), TypeError, "n must be a number, got None"),
     "load_table g None": (lambda: load_table("8d-sci", g=None), ValueError, "g must be one of 'isotropic', 'free', got None"),
