@@ -740,6 +740,14 @@ def test_unwritable_cache_folder_is_said_before_the_build(tmp_path, monkeypatch)
     )
 
 
+def test_without_file_locking_tables_are_built_unlocked(tmp_path, monkeypatch):
+    # neither fcntl (POSIX) nor msvcrt (Windows): the build proceeds as before, without a lock
+    monkeypatch.setattr(table_module, "fcntl", None)
+    monkeypatch.setattr(table_module, "msvcrt", None)
+    table = load_table(list(SMALL_INSTRUMENT), settings=SMALL_SETTINGS, cache_dir=tmp_path, progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"table-{table.key}.npz"]
+
+
 #: Seconds a test waits for a child process's next line (generous: 2 shared, loaded cores).
 CHILD_LINE_TIMEOUT = 120.0
 
