@@ -502,28 +502,26 @@ def directional_albedo(mu_i, *, alpha, n_i, n_t, distribution="ggx", n_panels=AL
 def _azimuth_panels(alpha, points_per_panel, n_modes):
     """Panel edges in ``psi`` over [0, pi] shared by every pair: halving in width from ``pi``
     down to :data:`AZIMUTH_FINEST_PANEL` ``* min(alpha, 1)`` at ``psi = 0`` (where the kernels
-    peak), and none wider than ``points_per_panel / n_modes`` so that ``cos(m psi)`` of every
+    peak), and none wider than ``points_per_panel / (2 n_modes)`` so that ``cos(m psi)`` of every
     mode asked for is resolved."""
     finest = AZIMUTH_FINEST_PANEL * min(alpha, 1.0)
     levels = int(np.ceil(np.log2(np.pi / finest)))
     graded = np.pi * 2.0 ** -np.arange(levels, -1, -1, dtype=float)
-    uniform = np.linspace(0.0, np.pi, int(np.ceil(np.pi * n_modes / points_per_panel)) + 1)
+    uniform = np.linspace(0.0, np.pi, int(np.ceil(2.0 * np.pi * n_modes / points_per_panel)) + 1)
     return np.unique(np.concatenate([[0.0], graded, uniform]))
 
 
 def _azimuth_rule(bounds, kink_cos_psi, points_per_panel):
     """Per-pair Gauss-Legendre nodes and weights in ``psi`` over [0, pi] on the panels
     ``bounds``, the panel holding the pair's ``kink_cos_psi`` (the azimuth where the integrand
-    stops being smooth: a facet's critical angle) split there. Returns ``psi`` and ``weight`` of
-    shape ``kink_cos_psi.shape + (P,)``."""
+    stops being smooth: a facet's critical angle, where the internal reflection goes like
+    ``sqrt(psi - psi_c)``) split there, each panel in the smoothstep variable of
+    :func:`_smoothstep_panels`. Returns ``psi`` and ``weight`` of shape
+    ``kink_cos_psi.shape + (P,)``."""
     kink = np.where(np.abs(kink_cos_psi) < 1.0, np.arccos(np.clip(kink_cos_psi, -1.0, 1.0)), np.pi)
     edges = np.sort(np.concatenate([np.broadcast_to(bounds, kink.shape + bounds.shape), kink[..., None]],
                                    axis=-1), axis=-1)
-    lo, width = edges[..., :-1], np.diff(edges, axis=-1)
-    x, w = np.polynomial.legendre.leggauss(points_per_panel)
-    psi = lo[..., None] + width[..., None] * 0.5 * (x + 1.0)
-    weight = width[..., None] * 0.5 * w
-    return psi.reshape(kink.shape + (-1,)), weight.reshape(kink.shape + (-1,))
+    return _smoothstep_panels(edges, points_per_panel)
 
 
 def _check_mode_arguments(mu_out, mu_in, n_modes, points_per_panel):
