@@ -345,6 +345,25 @@ def test_modes_sum_to_the_bsdf(case):
     assert _mode_sum_error(modes_of, bsdf, mu_out, mu_in, n_i, n_t, 160) < MODE_SUM_TOL
 
 
+def test_surface_lobe_in_the_projects_azimuth_convention():
+    """RoughSurfaceModes' stated use: f(delta_phi) = sum_m (2 - delta_m0) (-1)^m cos(m delta_phi) K_m / (2 pi),
+    delta_phi = 180 deg on the specular side (DESIGN.md), as forward.f0_modes."""
+    theta_i, theta_o = 45.0, np.array([20.0, 45.0, 70.0])
+    delta_phi = np.array([0.0, 90.0, 150.0, 180.0])
+    surface = mf.rough_surface_modes(np.cos(np.radians([theta_i])), np.cos(np.radians(theta_o)), MU_BINDER, 64,
+                                     alpha=0.3, n=N_BINDER)
+    m = np.arange(64)
+    weights = (2.0 - (m == 0))[:, None] * (-1.0) ** m[:, None] * np.cos(np.outer(m, np.radians(delta_phi)))
+    series = np.einsum("mo,mp->op", surface.r_air[:, :, 0], weights) / (2.0 * np.pi)
+    direct = mf.reflection_brdf(math.cos(math.radians(theta_i)), np.cos(np.radians(theta_o))[:, None],
+                                np.radians(delta_phi) - np.pi, alpha=0.3, n_i=1.0, n_t=N_BINDER)
+    assert np.abs(series - direct).max() < MODE_SUM_TOL * direct.max()
+    assert (direct.argmax(axis=1) == 3).all()  # largest on the specular side, delta_phi = 180
+    # viewing directions other than the incidence ones: t_out computed directly, still t_in's reciprocal
+    t_in_view = mf.transmission_modes(MU_BINDER, np.cos(np.radians(theta_o)), 64, alpha=0.3, n_i=1.0, n_t=N_BINDER)
+    assert np.allclose(surface.t_out, np.swapaxes(t_in_view, 1, 2) / N_BINDER**2, rtol=1e-9, atol=1e-12)
+
+
 def test_internal_reflection_modes_converge():
     args = (mf.reflection_modes, mf.reflection_brdf, MU_BINDER, MU_BINDER, N_BINDER, 1.0)
     coarse, fine = _mode_sum_error(*args, 160), _mode_sum_error(*args, 320)
