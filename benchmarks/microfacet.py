@@ -114,6 +114,13 @@ def main():
             print(f"  {name:28s} n_points needed: {' '.join(f'{x:>5s}' for x in needed)}"
                   f"   | error at 16: {' '.join(f'{e:.1e}' for e in at16)}")
 
+    print("\nenergy lost by the single-scattering model, 1 - R - T (GGX), at theta_i = 0 30 60 75 84 deg")
+    mu = np.cos(np.radians([0.0, 30.0, 60.0, 75.0, 84.0]))
+    for side, (n_i, n_t) in (("from air", (1.0, N)), ("from the binder", (N, 1.0))):
+        for alpha in (0.05, 0.1, 0.3, 0.5, 1.0):
+            r, t = mf.directional_albedo(mu, alpha=alpha, n_i=n_i, n_t=n_t)
+            print(f"  {side:15s} alpha {alpha:4.2f}: " + " ".join(f"{x:6.4f}" for x in 1.0 - r - t))
+
     print("\nazimuth rule (mode 0, alpha = 0.05): relative change of the kernels against 32 points per panel")
     mu_b, _ = binder_quadrature(32, N)
     mu_air = np.cos(np.radians(THETA_AIR))
