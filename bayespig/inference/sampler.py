@@ -117,8 +117,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._atomic import atomic_path
-from .likelihood import ForwardModel, LogPosterior, Priors, Problem
+from .._atomic import atomic_path
+from ..likelihood import ForwardModel, LogPosterior, Priors, Problem
 
 __all__ = [
     "MOVES",
@@ -825,7 +825,7 @@ def _resolve_eps(eps, measurements):
 
 def _point_starts(problem, g, tables, priors, log_post0, n_wavelengths):
     """Point-fit starts ``[a, log tau.., (g), (log eps)]`` per wavelength, and the fit."""
-    from .fit import FitSettings, fit_problem
+    from ..fit import FitSettings, fit_problem
 
     fit_settings = FitSettings(tau_bounds=tuple(float(v) for v in priors.tau_range),
                                a_bounds=tuple(float(v) for v in priors.a_range))
@@ -860,7 +860,7 @@ def _versions():
     import emcee
     import scipy
 
-    from . import __version__
+    from .. import __version__
 
     return {"bayespig_version": __version__, "numpy_version": np.__version__,
             "scipy_version": scipy.__version__, "emcee_version": emcee.__version__,
@@ -879,7 +879,7 @@ def _sample_with_card_factors(problem, model, priors, eps, settings, seed, subst
     (chain, draw, card), their autocorrelation times, the settings used (walkers raised to
     what the joint vector needs) and the joint log-posterior.
     """
-    from .substrate_nuisance import CardFactorLogPosterior, ConditionalBlocksMove
+    from ..substrate_nuisance import CardFactorLogPosterior, ConditionalBlocksMove
 
     cards, card_index, relative_sd = substrate
     G = len(problem.groups)
@@ -1166,7 +1166,7 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     ----------
     Ershov, Voloboy & Pozdnyakov (2023), eq. (7), section 3.
     """
-    from .data import MeasurementSet, read_measurements
+    from ..data import MeasurementSet, read_measurements
 
     if not isinstance(measurements, MeasurementSet):
         if isinstance(measurements, (str, os.PathLike)):
@@ -1180,7 +1180,7 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     problem = Problem.from_measurements(measurements, method)
     substrate = None
     if substrate_sd is not None:
-        from .substrate_nuisance import card_indices
+        from ..substrate_nuisance import card_indices
 
         if not (isinstance(substrate_sd, (int, float, np.floating)) and np.isfinite(substrate_sd)
                 and substrate_sd > 0):
