@@ -18,6 +18,11 @@ Modules
     ``concurrent.futures``-style executor.
 ``outputs``
     Per-wavelength records, value coordinates, provenance.
+``shared``
+    Parameters shared over wavelengths: one joint posterior in residual coordinates, block-wise
+    moves and a pilot start for any list of specs (:class:`~bayespig.inference.shared.SharedParameter`).
+``card_factors``
+    The first spec: one factor per card on the substrate albedo (``infer(substrate_sd=...)``).
 ``api``
     :func:`infer` and :func:`infer_problem`.
 ``summary``, ``storage``

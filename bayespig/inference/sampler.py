@@ -203,7 +203,7 @@ def _sample_stack(stacked, singles, starts, settings, seed_sequences, moves=None
         also seeds emcee's random state of the stack.
     moves : list, optional
         ``(move, weight)`` pairs replacing the settings' mixture (a stack of one member; e.g.
-        :class:`bayespig.substrate_nuisance.ConditionalBlocksMove`, which needs fewer walkers
+        :class:`bayespig.inference.shared.BlockwiseMove`, which needs fewer walkers
         than ``2 n_dim``).
     start_walkers : numpy.ndarray, optional
         Every walker's start (n_stack * n_ensembles * n_walkers, n_dim) instead of a ball
