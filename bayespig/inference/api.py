@@ -9,30 +9,65 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from ..likelihood import ForwardModel, LogPosterior, Priors, Problem
+from ..likelihood import ForwardModel, LogPosterior, Problem
+from .arguments import (
+    check_executor,
+    check_flag,
+    check_g,
+    check_method,
+    check_priors,
+    check_seed,
+    check_settings,
+    check_substrate_sd,
+    eps_argument,
+)
 from .card_factors import CardFactors, card_indices
 from .executors import _WORKER_TABLES, _map_tasks, _Task
 from .outputs import _inference_data
-from .settings import ConvergenceWarning, InferenceSettings
+from .settings import ConvergenceWarning
 from .shared import pilot_draws, sample_joint
 
 __all__ = ["infer", "infer_problem"]
 
 
 def _resolve_eps(eps, measurements):
-    """``(eps for LogPosterior, mode)`` from the ``eps`` argument."""
-    if isinstance(eps, str):
-        if eps != "infer":
-            raise ValueError(f"eps must be a positive number, None or 'infer', got {eps!r}")
+    """``(eps for LogPosterior, mode)`` from the ``eps`` argument (checked by
+    :func:`~bayespig.inference.arguments.eps_argument`): None is the set's own ``eps`` (metadata,
+    e.g. a simulated set) or 0.05."""
+    eps = eps_argument(eps)
+    if eps == "infer":
         return None, "inferred"
     if eps is None:
         metadata = getattr(measurements, "metadata", None) or {}
         value = metadata.get("eps") if isinstance(metadata, dict) else None
         eps = float(value) if isinstance(value, (int, float)) and value > 0 else 0.05
-    eps = float(eps)
-    if not (np.isfinite(eps) and eps > 0):
-        raise ValueError(f"eps must be a positive number, None or 'infer', got {eps!r}")
     return eps, "known"
+
+
+def _check_eps_identifiable(problem, log_post0):
+    """Refuse an inferred ``eps`` where the wavelengths have no more values than parameters.
+
+    With ``n_values <= n_parameters`` (``a``, every ``tau``, ``g``) the point fit reproduces
+    the data exactly, the likelihood grows without bound as ``eps -> 0`` and the run would go
+    to ``max_steps`` at every band with nothing learned. ``n_values`` is the same at every
+    wavelength (every film is measured at all of them).
+    """
+    if not log_post0.infer_eps:
+        return
+    names = [name for name in log_post0.parameter_names if name != "log_eps"]
+    if problem.n_values > len(names):
+        return
+    shown = []
+    for name in names:
+        if name.startswith("log_tau["):
+            name = "tau" if log_post0.n_groups == 1 else name[len("log_"):]
+        shown.append(name)
+    wl = np.asarray(problem.wavelength_nm, dtype=float)
+    where = f"{wl.min():g} nm" if wl.size == 1 or wl.min() == wl.max() else f"{wl.min():g}–{wl.max():g} nm"
+    values = f"{problem.n_values} value{'s' if problem.n_values != 1 else ''}"
+    raise ValueError(f"eps cannot be inferred: at {where} there {'are' if problem.n_values != 1 else 'is'} "
+                     f"only {values} for {len(names)} parameters ({', '.join(shown)}); give eps "
+                     "(e.g. eps=0.02, or --eps 0.02 on the command line)")
 
 
 def _point_starts(problem, g, tables, priors, log_post0, n_wavelengths):
@@ -83,20 +118,19 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     """
     if not isinstance(problem, Problem):
         raise TypeError(f"problem must be a bayespig.likelihood.Problem, got {type(problem).__name__}")
-    if g not in ("isotropic", "free"):
-        raise ValueError(f"g must be 'isotropic' or 'free', got {g!r}")
-    if not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    priors = Priors() if priors is None else priors
-    settings = InferenceSettings() if settings is None else settings
-    if not isinstance(priors, Priors):
-        raise TypeError(f"priors must be a bayespig.likelihood.Priors, got {type(priors).__name__}")
-    if not isinstance(settings, InferenceSettings):
-        raise TypeError(f"settings must be an InferenceSettings, got {type(settings).__name__}")
+    g, seed = check_g(g), check_seed(seed)
+    if eps is not None:
+        eps = eps_argument(eps)
+        if eps == "infer":
+            raise ValueError("eps must be a number in (0, 1) or None (inferred) for infer_problem, got 'infer'")
+    check_executor(executor)
+    progress = check_flag("progress", progress)
+    priors, settings = check_priors(priors), check_settings(settings)
     started = time.perf_counter()
     tables = {} if tables is None else tables
     model = ForwardModel(problem, g=g, tables=tables)
     log_post0 = LogPosterior(model, 0, priors, g=g, eps=eps)
+    _check_eps_identifiable(problem, log_post0)
     n_wl = problem.n_wavelengths
     starts, fit = _point_starts(problem, g, model.tables, priors, log_post0, n_wl)
     joint = None
@@ -161,9 +195,10 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         ``g = 0`` (the paper's recommendation) or ``g`` a parameter, uniform on the prior's
         range (needs look-up tables with a ``g`` axis).
     eps : float, "infer" or None
-        Relative measurement error of eq. (7) [-] for samples without their own: known
-        (default: the set's metadata ``eps`` when it has one, e.g. a simulated set, else 0.05),
-        or ``"infer"``: one ``eps`` per wavelength shared by those samples, log-uniform prior.
+        Relative measurement error of eq. (7) [-] for samples without their own: known, in
+        (0, 1) (default: the set's metadata ``eps`` when it has one, e.g. a simulated set, else
+        0.05), or ``"infer"``: one ``eps`` per wavelength shared by those samples, log-uniform
+        prior (needs more values per wavelength than parameters).
     executor : concurrent.futures.Executor, optional
         Runs the wavelengths in parallel (``submit``); e.g. a ``dask.distributed`` client's
         ``get_executor()``. Default: a local pool of 2 processes (serial for a single stack of
@@ -190,8 +225,13 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
 
     Raises
     ------
+    TypeError, ValueError
+        For an argument of the wrong kind or value (the message names it), and for
+        ``eps="infer"`` where a wavelength has no more values than parameters.
     ValueError, MeasurementError
         For a file that cannot be read or a method the samples do not support.
+    KeyboardInterrupt
+        Re-raised once after the workers have been stopped.
 
     Warns
     -----
@@ -204,25 +244,27 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     """
     from ..data import MeasurementSet, read_measurements
 
+    # every argument is checked before any file is read or any sample drawn
+    method, seed, g = check_method(method), check_seed(seed), check_g(g)
+    eps = eps_argument(eps)
+    check_executor(executor)
+    progress = check_flag("progress", progress)
+    priors, settings = check_priors(priors), check_settings(settings)
+    substrate_sd = check_substrate_sd(substrate_sd)
+    if substrate_sd is not None and (g != "isotropic" or eps == "infer"):
+        raise ValueError("substrate_sd needs g='isotropic' and a known eps (the joint run over all "
+                         "wavelengths does not sample g or eps)")
     if not isinstance(measurements, MeasurementSet):
         if isinstance(measurements, (str, os.PathLike)):
             measurements = read_measurements(measurements)
         else:
             raise TypeError("measurements must be a MeasurementSet or a path, "
                             f"got {type(measurements).__name__}")
-    if isinstance(method, (int, np.integer)) or method in ("1", "2", "3", "4"):
-        method = f"method{int(method)}"
     eps_value, _ = _resolve_eps(eps, measurements)
     problem = Problem.from_measurements(measurements, method)
     shared = []
     if substrate_sd is not None:
-        if not (isinstance(substrate_sd, (int, float, np.floating)) and np.isfinite(substrate_sd)
-                and substrate_sd > 0):
-            raise ValueError(f"substrate_sd must be a positive number, got {substrate_sd!r}")
-        if g != "isotropic" or eps_value is None:
-            raise ValueError("substrate_sd needs g='isotropic' and a known eps (the joint run over all "
-                             "wavelengths does not sample g or eps)")
         cards, card_index = card_indices(measurements, problem)
-        shared.append(CardFactors(problem, card_index, float(substrate_sd), cards))
+        shared.append(CardFactors(problem, card_index, substrate_sd, cards))
     return infer_problem(problem, seed=seed, g=g, eps=eps_value, executor=executor,
                          progress=progress, priors=priors, settings=settings, shared=shared)

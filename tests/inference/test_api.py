@@ -189,16 +189,63 @@ def test_general_problem_with_two_groups_has_tau_group():
     np.testing.assert_array_equal(post["tau"].values, post["tau_group"].values[..., 0])
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"eps": -1.0}, "eps"),
-    ({"eps": "guess"}, "eps"),
-    ({"g": "rayleigh"}, "g must be"),
-    ({"seed": -1}, "seed"),
-    ({"method": "method9"}, "method"),
+_EPS_RANGE = "(0, 1) (a relative error, e.g. 0.02 for 2 %)"
+_EPS_KIND = f"eps must be a number in {_EPS_RANGE}, 'infer' or None, got "
+_METHOD = "method must be 'auto', 'general', 'method1' ... 'method4' or 1 ... 4, got "
+_SUBSTRATE_SD = "substrate_sd must be a positive number (the prior sd of log f, e.g. 0.1 for 10 %) or None, got "
+
+
+@pytest.mark.parametrize("kwargs, error, message", [
+    ({"eps": -1.0}, ValueError, f"eps must lie in {_EPS_RANGE}, got -1.0"),
+    ({"eps": 5.0}, ValueError, f"eps must lie in {_EPS_RANGE}, got 5.0"),
+    ({"eps": [0.05, 0.05]}, TypeError, _EPS_KIND + "list [0.05, 0.05]"),
+    ({"eps": True}, TypeError, _EPS_KIND + "bool True"),
+    ({"eps": "guess"}, ValueError, _EPS_KIND + "'guess'"),
+    ({"g": "rayleigh"}, ValueError, "g must be 'isotropic' or 'free', got 'rayleigh'"),
+    ({"seed": -1}, ValueError, "seed must be a non-negative integer, got -1"),
+    ({"seed": True}, TypeError, "seed must be a non-negative integer, got bool True"),
+    ({"seed": 1.5}, TypeError, "seed must be a non-negative integer, got float 1.5"),
+    ({"method": "method9"}, ValueError, _METHOD + "'method9'"),
+    ({"method": 5}, ValueError, _METHOD + "5"),
+    ({"method": True}, TypeError, _METHOD + "bool True"),
+    ({"executor": "x"}, TypeError, ("executor must be None (a local pool of 2 processes) or a concurrent.futures-style "
+                                   "executor with a submit method (e.g. ProcessPoolExecutor, a dask client's "
+                                   "get_executor()), got str 'x'")),
+    ({"progress": "yes"}, TypeError, "progress must be True or False, got str 'yes'"),
+    ({"priors": 3}, TypeError, "priors must be a bayespig.likelihood.Priors, got int"),
+    ({"settings": {}}, TypeError, "settings must be an InferenceSettings, got dict"),
+    ({"substrate_sd": True}, TypeError, _SUBSTRATE_SD + "bool True"),
+    ({"substrate_sd": "0.1"}, TypeError, _SUBSTRATE_SD + "str '0.1'"),
+    ({"substrate_sd": -0.1}, ValueError, _SUBSTRATE_SD + "-0.1"),
 ])
-def test_bad_arguments_are_clear_errors(method4_set, kwargs, match):
-    with pytest.raises(ValueError, match=match):
-        infer(method4_set, progress=False, **kwargs)
+def test_bad_arguments_are_clear_errors(method4_set, tmp_path, kwargs, error, message):
+    """One TypeError/ValueError naming the argument, for a set and, before the file is read,
+    for a path that does not exist."""
+    kwargs = {"progress": False, **kwargs}
+    with pytest.raises(error) as caught:
+        infer(method4_set, **kwargs)
+    assert str(caught.value) == message
+    with pytest.raises(error) as caught:
+        infer(tmp_path / "not-read.csv", **kwargs)
+    assert str(caught.value) == message
+
+
+def test_measurements_of_another_kind_are_a_type_error():
+    with pytest.raises(TypeError) as caught:
+        infer(3, progress=False)
+    assert str(caught.value) == "measurements must be a MeasurementSet or a path, got int"
+
+
+def test_eps_cannot_be_inferred_from_as_many_values_as_parameters():
+    """An 8°/d black/white pair has 2 values per band for a and tau: the fit is exact at every
+    eps, so eps="infer" would run to max_steps at every band; it is refused before sampling."""
+    pair = simulate(a=0.1, tau=1.0, design="method4", instrument="8d-sce", wavelengths=[400.0, 550.0, 700.0],
+                    eps=0.02, seed=1)
+    with pytest.raises(ValueError) as caught:
+        infer(pair, eps="infer", progress=False, settings=FAST)
+    assert str(caught.value) == ("eps cannot be inferred: at 400–700 nm there are only 2 values for 2 "
+                                 "parameters (a, tau); give eps (e.g. eps=0.02, or --eps 0.02 on the "
+                                 "command line)")
 
 
 def test_odd_walkers_refused(method4_set):
