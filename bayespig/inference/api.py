@@ -5,7 +5,6 @@ from __future__ import annotations
 import os
 import time
 import warnings
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
@@ -22,7 +21,7 @@ from .arguments import (
     eps_argument,
 )
 from .card_factors import CardFactors, card_indices
-from .executors import _WORKER_TABLES, _map_tasks, _Task
+from .executors import _WORKER_TABLES, _Task, run_tasks
 from .outputs import _inference_data
 from .settings import ConvergenceWarning
 from .shared import pilot_draws, sample_joint
@@ -148,16 +147,9 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
         tasks = [_Task(problem, g, eps, priors, settings, tuple(range(i, min(i + per_run, n_wl))),
                        starts[i:i + per_run], tuple(seeds[i:i + per_run]))
                  for i in range(0, n_wl, per_run)]
-        own_pool = None
-        if executor is None and len(tasks) > 1:
-            own_pool = executor = ProcessPoolExecutor(max_workers=min(2, len(tasks), os.cpu_count() or 1))
-        if executor is None:
+        if executor is None and len(tasks) == 1:  # runs here: the tables loaded for the point fit
             _WORKER_TABLES.setdefault((g, problem.n), {}).update(model.tables)
-        try:
-            chunks = _map_tasks(tasks, executor, progress)
-        finally:
-            if own_pool is not None:
-                own_pool.shutdown()
+        chunks = run_tasks(tasks, executor, progress)
         results = [r for chunk in chunks for r in chunk]
 
     idata = _inference_data(problem, model, results, settings, log_post0, fit, seed=seed, g=g, eps=eps,
