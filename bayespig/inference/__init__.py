@@ -117,7 +117,12 @@ Attributes (on the InferenceData and on every group): ``bayespig_version``,
 ``numpy_version``, ``scipy_version``, ``emcee_version``, ``arviz_version``, ``seed``,
 ``method``, ``g``, ``eps_mode`` (``known``/``inferred``), ``settings`` (JSON), ``priors``
 (JSON of :meth:`Priors.describe`), ``table_keys`` (JSON list), ``instruments`` (JSON: name ->
-channel labels), ``n`` (binder index), ``parameter_names`` (JSON), ``created`` (UTC ISO time).
+channel labels), ``n`` (binder index), ``parameter_names`` (JSON), ``created`` (UTC ISO time),
+``sampling_wall_time_s``, ``substrate_factors`` (JSON; null without card factors).
+
+Variable attributes: every posterior variable has ``long_name`` and ``units`` (``"1"``, all
+are dimensionless; :data:`~bayespig.inference.outputs.VARIABLE_ATTRS`), the ``wavelength``
+coordinate of every group ``units="nm"``.
 
 References
 ----------

@@ -107,6 +107,8 @@ class CardFactors(SharedParameter):
     title = "substrate factors"
     variable = "r_s_factor"
     dimension = "card"
+    long_name = "factor on the card's albedo seen from the binder, r_s / r_s,card"
+    units = "1"
     coordinate_name = "log_r_s_factor"
     attribute = "substrate_factors"
 

@@ -7,6 +7,16 @@ import json
 
 import numpy as np
 
+#: CF-style ``long_name`` and ``units`` of the posterior variables (``"1"``: dimensionless).
+VARIABLE_ATTRS = {
+    "a": {"long_name": "relative absorption k_abs/k_ext", "units": "1"},
+    "tau": {"long_name": "optical thickness", "units": "1"},
+    "tau_group": {"long_name": "optical thickness per film group", "units": "1"},
+    "g": {"long_name": "Henyey-Greenstein asymmetry parameter g", "units": "1"},
+    "eps": {"long_name": "relative measurement error eps (eq. 7)", "units": "1"},
+}
+#: ... and of the wavelength coordinate of every group.
+WAVELENGTH_ATTRS = {"long_name": "wavelength", "units": "nm"}
 #: Storage type of the per-draw predictions and pointwise log-likelihoods.
 STORED_DRAW_DTYPE = np.float32
 
@@ -190,4 +200,11 @@ def _inference_data(problem, model, results, settings, log_post0, fit, *, seed, 
     }
     for dataset in datasets.values():
         dataset.attrs.update(attrs)
+        if "wavelength" in dataset.coords:
+            dataset.coords["wavelength"].attrs.update(WAVELENGTH_ATTRS)
+    described = dict(VARIABLE_ATTRS)
+    described.update({spec.variable: {"long_name": spec.long_name, "units": spec.units} for spec, _ in shared})
+    for name, variable_attrs in described.items():
+        if name in datasets["posterior"]:
+            datasets["posterior"][name].attrs.update(variable_attrs)
     return az.InferenceData(attrs=attrs, **datasets)

@@ -121,6 +121,8 @@ class SharedParameter:
     variable, dimension : str
         Posterior variable of the physical values and its dimension (e.g. ``"r_s_factor"``
         over ``"card"``).
+    long_name, units : str
+        The posterior variable's netCDF attributes (``units="1"``: dimensionless).
     labels : tuple of str
         One per coordinate (the dimension's coordinate values).
     coordinate_name : str
@@ -136,7 +138,8 @@ class SharedParameter:
     """
 
     title = "shared parameters"
-    variable = dimension = coordinate_name = ""
+    variable = dimension = coordinate_name = long_name = ""
+    units = "1"
     attribute = None
 
     @property

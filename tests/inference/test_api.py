@@ -12,6 +12,8 @@ from bayespig.inference import (
     InferenceSettings,
     diagnose,
     infer,
+    load_inference,
+    save_inference,
     summarize,
 )
 from bayespig.likelihood import Priors
@@ -123,7 +125,7 @@ def test_run_length_cap_warns():
         assert diagnose(idata)
 
 
-def test_inferred_eps_and_method1_groups():
+def test_inferred_eps_and_method1_groups(tmp_path):
     """eps inferred: a posterior variable near the simulated eps; method 1: tau from T."""
     ms = simulate(a=0.1, tau=1.0, design="method1", wavelengths=[500.0], eps=0.05, seed=4)
     idata = infer(ms, method=1, eps="infer", progress=False, settings=FAST)
@@ -136,6 +138,9 @@ def test_inferred_eps_and_method1_groups():
     assert np.quantile(eps, 0.01) < 0.05 < np.quantile(eps, 0.99)
     assert list(idata.observed_data["kind"].values) == ["reflectance"] * 6 + ["transmittance"]
     assert list(idata.observed_data["film_group"].values) == [""] * 6 + ["on_glass"]
+    save_inference(idata, tmp_path / "posterior.nc")
+    eps_back = load_inference(tmp_path / "posterior.nc").posterior["eps"]
+    assert eps_back.attrs == {"long_name": "relative measurement error eps (eq. 7)", "units": "1"}
 
 
 def test_free_g_posterior_recovers_the_simulated_g(tmp_path):
@@ -163,6 +168,7 @@ def test_free_g_posterior_recovers_the_simulated_g(tmp_path):
     post = idata.posterior
     assert post["g"].dims == ("chain", "draw", "wavelength")
     assert "g" in json.loads(post.attrs["parameter_names"]) and post.attrs["g"] == "free"
+    assert post["g"].attrs == {"long_name": "Henyey-Greenstein asymmetry parameter g", "units": "1"}
     assert (-0.5 <= post["g"].values).all() and (post["g"].values <= 0.8).all()
     assert idata.sample_stats["autocorr_time"].sel(parameter="g").notnull().all()
     summary = summarize(idata)

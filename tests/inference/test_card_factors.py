@@ -83,7 +83,7 @@ def test_joint_log_posterior_in_residual_coordinates_is_the_direct_one():
         CardFactorLogPosterior(model, index, theta_hat, relative_sd=0.0)
 
 
-def test_infer_recovers_a_known_card_factor():
+def test_infer_recovers_a_known_card_factor(tmp_path):
     """Multi-angle (six values per card and wavelength): the data move the white card's factor
     from the prior's 1 to the truth 1.1, and narrow it far below the 10 % prior."""
     ms = _simulated("multi-angle-45")
@@ -101,6 +101,11 @@ def test_infer_recovers_a_known_card_factor():
 
     assert float(az.rhat(factors).to_array().max()) < 1.01
     assert idata.posterior["a"].shape[-1] == WAVELENGTHS.size
+    from bayespig.inference import load_inference, save_inference
+
+    save_inference(idata, tmp_path / "posterior.nc")
+    assert load_inference(tmp_path / "posterior.nc").posterior["r_s_factor"].attrs == {
+        "long_name": "factor on the card's albedo seen from the binder, r_s / r_s,card", "units": "1"}
 
 
 def test_infer_with_card_factor_matches_a_grid_posterior():

@@ -33,3 +33,19 @@ def test_load_inference_rejects_other_files(tmp_path):
     bad.write_text("not netcdf")
     with pytest.raises(ValueError, match="bad.nc"):
         load_inference(bad)
+
+
+def test_saved_posterior_has_units_and_long_names(method4_idata, tmp_path):
+    """netCDF readers (ncdump, xarray) see what every variable is: long names and units."""
+    path = tmp_path / "posterior.nc"
+    save_inference(method4_idata, path)
+    back = load_inference(path)
+    post = back.posterior
+    assert post["a"].attrs["long_name"] == "relative absorption k_abs/k_ext"
+    assert post["tau"].attrs["long_name"] == "optical thickness"
+    assert post["a"].attrs["units"] == post["tau"].attrs["units"] == "1"
+    for group in ("posterior", "posterior_predictive", "log_likelihood", "observed_data", "constant_data",
+                  "sample_stats"):
+        wavelength = getattr(back, group)["wavelength"]
+        assert wavelength.attrs["units"] == "nm" and wavelength.attrs["long_name"] == "wavelength", group
+
