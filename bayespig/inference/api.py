@@ -65,7 +65,8 @@ def _check_eps_identifiable(problem, log_post0):
     where = f"{wl.min():g} nm" if wl.size == 1 or wl.min() == wl.max() else f"{wl.min():g}–{wl.max():g} nm"
     values = f"{problem.n_values} value{'s' if problem.n_values != 1 else ''}"
     raise ValueError(f"eps cannot be inferred: at {where} there {'are' if problem.n_values != 1 else 'is'} "
-                     f"only {values} for {len(names)} parameters ({', '.join(shown)}); give eps "
+                     f"only {values} for {len(names)} parameter{'s' if len(names) != 1 else ''} "
+                     f"({', '.join(shown)}); give eps "
                      "(e.g. eps=0.02, or --eps 0.02 on the command line)")
 
 
