@@ -48,8 +48,11 @@ A spec says, for its coordinates: their names (``labels``, one posterior variabl
 (``start_sd``), the prior (:meth:`~SharedParameter.log_prior`), the transform to the stored
 physical value (:meth:`~SharedParameter.physical`), and how it enters the forward model at
 every wavelength (:meth:`~SharedParameter.model_inputs`: keyword arrays of the
-per-wavelength model, :class:`bayespig.likelihood.WavelengthModel`). Nothing else changes.
-The parameters the open issues need, each one spec:
+per-wavelength model, :class:`bayespig.likelihood.WavelengthModel`, which must accept them:
+a new keyword there, and the tables behind it, is the forward-model side of a new spec). The
+pilot runs the problem as given, so ``nominal`` is the value the problem implies without the
+spec (``f = 1`` for a card, the roughness the problem is built with). Nothing else changes. The
+parameters the open issues need, each one spec:
 
 Roughness (issue 16)
     One coordinate ``log alpha`` per film (or per film group, or one for the set), prior
@@ -65,10 +68,14 @@ Binder index ``n`` (issue 16)
     per-wavelength model (tables with an ``n`` axis).
 Film thickness (issue 17)
     One coordinate ``log h`` per film, prior normal around a measured thickness (or flat when
-    none); the per-wavelength block then holds the pigment's constants and every film's
-    ``tau`` is its concentration times the extinction times ``h``: a ``tau_scale`` keyword
-    per film group of the per-wavelength model. One film's scale is fixed (or has an
-    informative prior) so that the product stays identifiable.
+    none), physical value ``h``; it enters through a ``tau_scale`` keyword per film of the
+    per-wavelength model (``tau_film(λ) = h_film * tau_per_thickness(λ)``), so that the
+    per-wavelength block holds the optical thickness per unit film thickness. For a pigment
+    library the block becomes the pigments' constants (``a_i``, ``k_i`` per wavelength, films
+    mixed by their recipes): the block layout (``[a, log tau_1..G]`` per wavelength in
+    :class:`JointLogPosterior` today) is then the one part to generalise; the residual
+    coordinates, the moves and the pilot start do not depend on what a block holds. One
+    thickness is fixed (or has an informative prior) so that ``h * k`` stays identifiable.
 
 Several specs at once (card factors and roughness) concatenate their coordinates in ``phi``
 and are moved together in the shared block.
