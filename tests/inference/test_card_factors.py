@@ -176,3 +176,21 @@ def test_the_old_module_path_still_imports():
 
     for name in old.__all__:
         assert getattr(old, name) is getattr(new, name)
+
+
+def test_a_capped_joint_run_says_so():
+    """A joint run stopped at max_steps warns once, naming the shared parameters."""
+    import warnings
+
+    from bayespig.inference import ConvergenceWarning
+
+    ms = _simulated("8d-sce", wavelengths=[550.0], a=(0.1,), tau=(1.0,))
+    short = InferenceSettings(min_steps=100, max_steps=100, check_interval=100, draws_per_chain=64)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        idata = infer(ms, method="method4", eps=0.01, seed=1, progress=False, settings=short, substrate_sd=0.1)
+    joint = [str(w.message) for w in caught if issubclass(w.category, ConvergenceWarning)
+             and "joint" in str(w.message)]
+    assert joint == [("the joint run with substrate factors was capped at max_steps=100 before reaching 50 "
+                     "autocorrelation times / ESS 1000")]
+    assert idata.sample_stats["max_steps_reached"].values.tolist() == [1]
