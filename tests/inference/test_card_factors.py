@@ -1,4 +1,4 @@
-"""Substrate factor as a nuisance parameter (bayespig.substrate_nuisance, infer(substrate_sd=...))."""
+"""Card factors on the substrate albedo (bayespig.inference.card_factors, infer(substrate_sd=...))."""
 
 import dataclasses
 
@@ -8,8 +8,8 @@ import pytest
 from bayespig.data import simulate
 from bayespig.data.simulate import FilmSpec
 from bayespig.inference import InferenceSettings, infer
+from bayespig.inference.card_factors import CardFactorLogPosterior, card_indices
 from bayespig.likelihood import ForwardModel, Priors, Problem, multiplicative_normal_logpdf
-from bayespig.substrate_nuisance import CardFactorLogPosterior, card_indices
 from bayespig.table import load_table
 
 WAVELENGTHS = np.array([450.0, 550.0, 650.0])
@@ -83,7 +83,7 @@ def test_joint_log_posterior_in_residual_coordinates_is_the_direct_one():
         CardFactorLogPosterior(model, index, theta_hat, relative_sd=0.0)
 
 
-def test_infer_recovers_a_known_card_factor():
+def test_infer_recovers_a_known_card_factor(tmp_path):
     """Multi-angle (six values per card and wavelength): the data move the white card's factor
     from the prior's 1 to the truth 1.1, and narrow it far below the 10 % prior."""
     ms = _simulated("multi-angle-45")
@@ -101,6 +101,11 @@ def test_infer_recovers_a_known_card_factor():
 
     assert float(az.rhat(factors).to_array().max()) < 1.01
     assert idata.posterior["a"].shape[-1] == WAVELENGTHS.size
+    from bayespig.inference import load_inference, save_inference
+
+    save_inference(idata, tmp_path / "posterior.nc")
+    assert load_inference(tmp_path / "posterior.nc").posterior["r_s_factor"].attrs == {
+        "long_name": "factor on the card's albedo seen from the binder, r_s / r_s,card", "units": "1"}
 
 
 def test_infer_with_card_factor_matches_a_grid_posterior():
@@ -161,3 +166,31 @@ def test_cli_infer_and_report_with_card_factors(tmp_path, capsys):
     white = next(f for f in summary["substrate_factors"] if f["card"] == str(STATED_WHITE))
     assert white["low"] < TRUE_WHITE / STATED_WHITE < white["high"] and white["relative_sd"] == 0.1
     assert "r_s = f r_s,card" in (tmp_path / "r" / "report.md").read_text()
+
+
+def test_the_old_module_path_still_imports():
+    """``bayespig.substrate_nuisance`` (the card factors' home before the joint machinery was
+    made general) names the same objects."""
+    import bayespig.inference.card_factors as new
+    import bayespig.substrate_nuisance as old
+
+    for name in old.__all__:
+        assert getattr(old, name) is getattr(new, name)
+
+
+def test_a_capped_joint_run_says_so():
+    """A joint run stopped at max_steps warns once, naming the shared parameters."""
+    import warnings
+
+    from bayespig.inference import ConvergenceWarning
+
+    ms = _simulated("8d-sce", wavelengths=[550.0], a=(0.1,), tau=(1.0,))
+    short = InferenceSettings(min_steps=100, max_steps=100, check_interval=100, draws_per_chain=64)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        idata = infer(ms, method="method4", eps=0.01, seed=1, progress=False, settings=short, substrate_sd=0.1)
+    joint = [str(w.message) for w in caught if issubclass(w.category, ConvergenceWarning)
+             and "joint" in str(w.message)]
+    assert joint == [("the joint run with substrate factors was capped at max_steps=100 before reaching 50 "
+                     "autocorrelation times / ESS 1000")]
+    assert idata.sample_stats["max_steps_reached"].values.tolist() == [1]

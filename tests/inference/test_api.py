@@ -1,17 +1,14 @@
-"""emcee posteriors per wavelength: schema, reproducibility, executors, calibration checks."""
+"""infer and infer_problem: schema, reproducibility, parameters, argument checks, calibration."""
 
 import json
 import warnings
-from concurrent.futures import Future, ProcessPoolExecutor
 
-import emcee
 import numpy as np
 import pytest
 
 from bayespig.data import simulate
 from bayespig.inference import (
     ConvergenceWarning,
-    IndependentEnsemblesMove,
     InferenceSettings,
     diagnose,
     infer,
@@ -21,10 +18,9 @@ from bayespig.inference import (
 )
 from bayespig.likelihood import Priors
 
+from .common import FAST, MC_Z
+
 # --- tolerances -----------------------------------------------------------------------------
-#: Monte-Carlo z-score allowed between a sample mean and its expectation (|z| > 4.5 has
-#: probability ~7e-6 per comparison for a correct sampler).
-MC_Z = 4.5
 #: Posterior sd vs the frequentist RMS of the point fits where the posterior is well
 #: identified. Issue 6 asks for a factor 1.5, but that band would pass an eps wrong by 40 %;
 #: the sampling errors are ~5 % (an rms over 200 replicates, 1/sqrt(400)) and ~3 % (the mean
@@ -35,72 +31,8 @@ RAVINE_CORRELATION = 0.5
 #: ... and its tau spread this many times method 4's for the same film.
 RAVINE_SPREAD_RATIO = 10.0
 
-#: Small but honest runs for the default test run.
-FAST = InferenceSettings(n_walkers=16, n_ensembles=4, draws_per_chain=512, target_ess=400)
-
 #: Draw-wise predictions and log-likelihoods are stored in single precision.
 SINGLE_PRECISION_TOL = 1e-5
-
-
-@pytest.fixture(scope="module")
-def method4_set():
-    return simulate(a=[0.05, 0.1, 0.2], tau=[0.5, 1.0, 2.0], design="method4",
-                    wavelengths=[450.0, 550.0, 650.0], eps=0.05, seed=11)
-
-
-@pytest.fixture(scope="module")
-def method4_idata(method4_set):
-    return infer(method4_set, seed=5, progress=False, settings=FAST, executor=None)
-
-
-# --- the moves ------------------------------------------------------------------------------
-
-
-@pytest.mark.parametrize("kind", IndependentEnsemblesMove.KINDS)
-def test_moves_sample_a_correlated_gaussian(kind):
-    """Each proposal, run as 3 independent ensembles, has the target's mean and covariance."""
-    mean = np.array([1.0, -2.0, 0.5])
-    cov = np.array([[1.0, 0.9, 0.2], [0.9, 1.0, 0.1], [0.2, 0.1, 0.5]])
-    precision = np.linalg.inv(cov)
-
-    def log_prob(x):
-        d = x - mean
-        return -0.5 * np.einsum("ij,jk,ik->i", d, precision, d)
-
-    n_ensembles, width = 3, 12
-    rng = np.random.default_rng(0)
-    sampler = emcee.EnsembleSampler(n_ensembles * width, 3, log_prob, vectorize=True,
-                                    moves=[(IndependentEnsemblesMove(kind, n_ensembles), 1.0)])
-    sampler.random_state = np.random.RandomState(1).get_state()
-    sampler.run_mcmc(mean + rng.standard_normal((n_ensembles * width, 3)), 2500, progress=False)
-    chain = sampler.get_chain(discard=300)
-    tau = emcee.autocorr.integrated_time(chain, tol=0, quiet=True).max()
-    flat = chain.reshape(-1, 3)
-    n_eff = flat.shape[0] / tau
-    se_mean = np.sqrt(np.diag(cov) / n_eff)
-    assert np.all(np.abs(flat.mean(axis=0) - mean) < MC_Z * se_mean)
-    # covariance entries: se of a sample covariance ~ sqrt((s_ii s_jj + s_ij^2) / n_eff)
-    sample_cov = np.cov(flat.T)
-    se_cov = np.sqrt((np.outer(np.diag(cov), np.diag(cov)) + cov ** 2) / n_eff)
-    assert np.all(np.abs(sample_cov - cov) < MC_Z * se_cov)
-
-
-def test_ensembles_do_not_mix():
-    """Walkers of one ensemble never move towards another ensemble's walkers."""
-    def log_prob(x):  # two far-apart modes; each ensemble starts in one
-        return np.logaddexp(-0.5 * ((x - 10.0) ** 2).sum(axis=1), -0.5 * ((x + 10.0) ** 2).sum(axis=1))
-
-    rng = np.random.default_rng(3)
-    start = np.concatenate([10 + rng.standard_normal((8, 2)), -10 + rng.standard_normal((8, 2))])
-    sampler = emcee.EnsembleSampler(16, 2, log_prob, vectorize=True,
-                                    moves=[(IndependentEnsemblesMove("de", 2), 1.0)])
-    sampler.random_state = np.random.RandomState(2).get_state()
-    sampler.run_mcmc(start, 300, progress=False)
-    chain = sampler.get_chain()
-    assert (chain[:, :8] > 0).all() and (chain[:, 8:] < 0).all()
-
-
-# --- schema ---------------------------------------------------------------------------------
 
 
 def test_inference_data_schema(method4_idata, method4_set):
@@ -161,68 +93,12 @@ def test_log_likelihood_group_is_eq7_at_the_draws(method4_idata):
                                expected.sum(axis=-1), rtol=SINGLE_PRECISION_TOL, atol=12 * SINGLE_PRECISION_TOL)
 
 
-def test_summary_table(method4_idata):
-    summary = summarize(method4_idata)
-    assert list(summary.index) == [450.0, 550.0, 650.0]
-    post = method4_idata.posterior
-    for k, wl in enumerate(summary.index):
-        a = post["a"].values[..., k].ravel()
-        log_tau = np.log(post["tau"].values[..., k].ravel())
-        assert summary.loc[wl, "corr_a_log_tau"] == pytest.approx(np.corrcoef(a, log_tau)[0, 1], abs=1e-12)
-        assert summary.loc[wl, "a_hdi_low"] < summary.loc[wl, "a_mean"] < summary.loc[wl, "a_hdi_high"]
-        # a 90 % HDI of a near-Gaussian posterior is about 2 x 1.645 sd wide
-        width = summary.loc[wl, "tau_hdi_high"] - summary.loc[wl, "tau_hdi_low"]
-        assert 2.8 < width / summary.loc[wl, "tau_sd"] < 3.8
-    assert (summary["a_r_hat"] < 1.01).all() and (summary["tau_ess_bulk"] > 400).all()
-    assert diagnose(method4_idata) == []
-
-
 def test_posterior_contains_the_truth(method4_idata):
     """Method 4 is well identified: the truth lies within a few posterior sd at every wavelength."""
     summary = summarize(method4_idata)
     z_a = (summary["a_mean"] - [0.05, 0.1, 0.2]) / summary["a_sd"]
     z_tau = (np.log(summary["tau_mean"]) - np.log([0.5, 1.0, 2.0])) / (summary["tau_sd"] / summary["tau_mean"])
     assert (np.abs(z_a) < 4).all() and (np.abs(z_tau) < 4).all()
-
-
-# --- reproducibility and executors ----------------------------------------------------------
-
-
-class _InlineExecutor:
-    """``submit`` runs the task at once, in this process (a serial executor)."""
-
-    def submit(self, fn, *args):
-        future = Future()
-        future.set_result(fn(*args))
-        return future
-
-
-def test_same_seed_identical_whatever_the_executor(method4_set, method4_idata):
-    """The samples depend on seed and settings only: a process pool, a serial executor and the
-    default (one stack, serial) agree bit for bit; a stack of one wavelength per run is a
-    different but equally valid grouping."""
-    single = InferenceSettings(**{**FAST.__dict__, "wavelengths_per_run": 1})
-    with ProcessPoolExecutor(max_workers=2) as pool:
-        pooled = infer(method4_set, seed=5, progress=False, settings=single, executor=pool)
-    inline = infer(method4_set, seed=5, progress=False, settings=single, executor=_InlineExecutor())
-    stacked_inline = infer(method4_set, seed=5, progress=False, settings=FAST, executor=_InlineExecutor())
-    for name in ("a", "tau"):
-        np.testing.assert_array_equal(pooled.posterior[name].values, inline.posterior[name].values)
-        np.testing.assert_array_equal(stacked_inline.posterior[name].values,
-                                      method4_idata.posterior[name].values)
-    np.testing.assert_array_equal(pooled.posterior_predictive["y"].values,
-                                  inline.posterior_predictive["y"].values)
-
-
-def test_dask_executor_gives_the_same_samples(method4_set, method4_idata):
-    from dask.distributed import Client, LocalCluster
-
-    one = simulate(a=0.05, tau=0.5, design="method4", wavelengths=[450.0], eps=0.05, seed=11)
-    with (LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None)
-          as cluster, Client(cluster) as client):
-        distributed = infer(one, seed=5, progress=False, settings=FAST, executor=client.get_executor())
-    serial = infer(one, seed=5, progress=False, settings=FAST, executor=None)
-    np.testing.assert_array_equal(distributed.posterior["a"].values, serial.posterior["a"].values)
 
 
 def test_different_seeds_give_statistically_equal_summaries(method4_set, method4_idata):
@@ -239,46 +115,6 @@ def test_different_seeds_give_statistically_equal_summaries(method4_set, method4
         assert (np.abs(s1[f"{name}_sd"] - s2[f"{name}_sd"]) < MC_Z * se_sd).all()
 
 
-# --- files ----------------------------------------------------------------------------------
-
-
-def test_netcdf_round_trip(method4_idata, tmp_path):
-    path = tmp_path / "sub" / "posterior.nc"
-    save_inference(method4_idata, path)
-    assert [p.name for p in path.parent.iterdir()] == ["posterior.nc"]  # no temporary left
-    back = load_inference(path)
-    for group in ("posterior", "posterior_predictive", "log_likelihood", "observed_data",
-                  "constant_data", "sample_stats"):
-        original, loaded = getattr(method4_idata, group), getattr(back, group)
-        for name in original.data_vars:
-            np.testing.assert_array_equal(loaded[name].values, original[name].values)
-    assert list(back.observed_data["channel"].values) == list(method4_idata.observed_data["channel"].values)
-    assert back.posterior.attrs["settings"] == method4_idata.posterior.attrs["settings"]
-    assert summarize(back).equals(summarize(method4_idata))
-
-
-def test_load_inference_rejects_other_files(tmp_path):
-    with pytest.raises(ValueError, match="no such file"):
-        load_inference(tmp_path / "missing.nc")
-    bad = tmp_path / "bad.nc"
-    bad.write_text("not netcdf")
-    with pytest.raises(ValueError, match="bad.nc"):
-        load_inference(bad)
-
-
-# --- diagnostics ----------------------------------------------------------------------------
-
-
-def test_diagnose_flags_chains_that_disagree(method4_idata):
-    broken = method4_idata.copy()
-    a = broken.posterior["a"].values.copy()
-    a[0, :, 1] += 3 * a[..., 1].std()  # chain 0 of 550 nm elsewhere
-    broken.posterior["a"] = (("chain", "draw", "wavelength"), a)
-    with pytest.warns(ConvergenceWarning, match="550 nm"):
-        lines = diagnose(broken)
-    assert len(lines) == 1 and lines[0].startswith("550 nm") and "R-hat(a)" in lines[0]
-
-
 def test_run_length_cap_warns():
     one = simulate(a=0.1, tau=1.0, design="method4", wavelengths=[500.0], eps=0.05, seed=1)
     settings = InferenceSettings(min_steps=100, max_steps=100, check_interval=100, draws_per_chain=64)
@@ -289,10 +125,7 @@ def test_run_length_cap_warns():
         assert diagnose(idata)
 
 
-# --- parameters -----------------------------------------------------------------------------
-
-
-def test_inferred_eps_and_method1_groups():
+def test_inferred_eps_and_method1_groups(tmp_path):
     """eps inferred: a posterior variable near the simulated eps; method 1: tau from T."""
     ms = simulate(a=0.1, tau=1.0, design="method1", wavelengths=[500.0], eps=0.05, seed=4)
     idata = infer(ms, method=1, eps="infer", progress=False, settings=FAST)
@@ -305,6 +138,9 @@ def test_inferred_eps_and_method1_groups():
     assert np.quantile(eps, 0.01) < 0.05 < np.quantile(eps, 0.99)
     assert list(idata.observed_data["kind"].values) == ["reflectance"] * 6 + ["transmittance"]
     assert list(idata.observed_data["film_group"].values) == [""] * 6 + ["on_glass"]
+    save_inference(idata, tmp_path / "posterior.nc")
+    eps_back = load_inference(tmp_path / "posterior.nc").posterior["eps"]
+    assert eps_back.attrs == {"long_name": "relative measurement error eps (eq. 7)", "units": "1"}
 
 
 def test_free_g_posterior_recovers_the_simulated_g(tmp_path):
@@ -332,6 +168,7 @@ def test_free_g_posterior_recovers_the_simulated_g(tmp_path):
     post = idata.posterior
     assert post["g"].dims == ("chain", "draw", "wavelength")
     assert "g" in json.loads(post.attrs["parameter_names"]) and post.attrs["g"] == "free"
+    assert post["g"].attrs == {"long_name": "Henyey-Greenstein asymmetry parameter g", "units": "1"}
     assert (-0.5 <= post["g"].values).all() and (post["g"].values <= 0.8).all()
     assert idata.sample_stats["autocorr_time"].sel(parameter="g").notnull().all()
     summary = summarize(idata)
@@ -358,27 +195,63 @@ def test_general_problem_with_two_groups_has_tau_group():
     np.testing.assert_array_equal(post["tau"].values, post["tau_group"].values[..., 0])
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"eps": -1.0}, "eps"),
-    ({"eps": "guess"}, "eps"),
-    ({"g": "rayleigh"}, "g must be"),
-    ({"seed": -1}, "seed"),
-    ({"method": "method9"}, "method"),
-])
-def test_bad_arguments_are_clear_errors(method4_set, kwargs, match):
-    with pytest.raises(ValueError, match=match):
-        infer(method4_set, progress=False, **kwargs)
+_EPS_RANGE = "(0, 1) (a relative error, e.g. 0.02 for 2 %)"
+_EPS_KIND = f"eps must be a number in {_EPS_RANGE}, 'infer' or None, got "
+_METHOD = "method must be 'auto', 'general', 'method1' ... 'method4' or 1 ... 4, got "
+_SUBSTRATE_SD = "substrate_sd must be a positive number (the prior sd of log f, e.g. 0.1 for 10 %) or None, got "
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"n_ensembles": 1}, "n_ensembles"),
-    ({"moves": "gibbs"}, "moves"),
-    ({"max_steps": 10, "min_steps": 20}, "max_steps"),
-    ({"n_walkers": 0}, "n_walkers"),
+@pytest.mark.parametrize("kwargs, error, message", [
+    ({"eps": -1.0}, ValueError, f"eps must lie in {_EPS_RANGE}, got -1.0"),
+    ({"eps": 5.0}, ValueError, f"eps must lie in {_EPS_RANGE}, got 5.0"),
+    ({"eps": [0.05, 0.05]}, TypeError, _EPS_KIND + "list [0.05, 0.05]"),
+    ({"eps": True}, TypeError, _EPS_KIND + "bool True"),
+    ({"eps": "guess"}, ValueError, _EPS_KIND + "'guess'"),
+    ({"g": "rayleigh"}, ValueError, "g must be 'isotropic' or 'free', got 'rayleigh'"),
+    ({"seed": -1}, ValueError, "seed must be a non-negative integer, got -1"),
+    ({"seed": True}, TypeError, "seed must be a non-negative integer, got bool True"),
+    ({"seed": 1.5}, TypeError, "seed must be a non-negative integer, got float 1.5"),
+    ({"method": "method9"}, ValueError, _METHOD + "'method9'"),
+    ({"method": 5}, ValueError, _METHOD + "5"),
+    ({"method": True}, TypeError, _METHOD + "bool True"),
+    ({"executor": "x"}, TypeError, ("executor must be None (a local pool of 2 processes) or a concurrent.futures-style "
+                                   "executor with a submit method (e.g. ProcessPoolExecutor, a dask client's "
+                                   "get_executor()), got str 'x'")),
+    ({"progress": "yes"}, TypeError, "progress must be True or False, got str 'yes'"),
+    ({"priors": 3}, TypeError, "priors must be a bayespig.likelihood.Priors, got int"),
+    ({"settings": {}}, TypeError, "settings must be an InferenceSettings, got dict"),
+    ({"substrate_sd": True}, TypeError, _SUBSTRATE_SD + "bool True"),
+    ({"substrate_sd": "0.1"}, TypeError, _SUBSTRATE_SD + "str '0.1'"),
+    ({"substrate_sd": -0.1}, ValueError, _SUBSTRATE_SD + "-0.1"),
 ])
-def test_bad_settings_are_clear_errors(kwargs, match):
-    with pytest.raises(ValueError, match=match):
-        InferenceSettings(**kwargs)
+def test_bad_arguments_are_clear_errors(method4_set, tmp_path, kwargs, error, message):
+    """One TypeError/ValueError naming the argument, for a set and, before the file is read,
+    for a path that does not exist."""
+    kwargs = {"progress": False, **kwargs}
+    with pytest.raises(error) as caught:
+        infer(method4_set, **kwargs)
+    assert str(caught.value) == message
+    with pytest.raises(error) as caught:
+        infer(tmp_path / "not-read.csv", **kwargs)
+    assert str(caught.value) == message
+
+
+def test_measurements_of_another_kind_are_a_type_error():
+    with pytest.raises(TypeError) as caught:
+        infer(3, progress=False)
+    assert str(caught.value) == "measurements must be a MeasurementSet or a path, got int"
+
+
+def test_eps_cannot_be_inferred_from_as_many_values_as_parameters():
+    """An 8°/d black/white pair has 2 values per band for a and tau: the fit is exact at every
+    eps, so eps="infer" would run to max_steps at every band; it is refused before sampling."""
+    pair = simulate(a=0.1, tau=1.0, design="method4", instrument="8d-sce", wavelengths=[400.0, 550.0, 700.0],
+                    eps=0.02, seed=1)
+    with pytest.raises(ValueError) as caught:
+        infer(pair, eps="infer", progress=False, settings=FAST)
+    assert str(caught.value) == ("eps cannot be inferred: at 400–700 nm there are only 2 values for 2 "
+                                 "parameters (a, tau); give eps (e.g. eps=0.02, or --eps 0.02 on the "
+                                 "command line)")
 
 
 def test_odd_walkers_refused(method4_set):
@@ -390,9 +263,6 @@ def test_odd_walkers_refused(method4_set):
 def test_missing_file_is_a_clear_error(tmp_path):
     with pytest.raises(Exception, match="nothing.csv"):
         infer(tmp_path / "nothing.csv", progress=False)
-
-
-# --- the paper's questions, the Bayesian way ------------------------------------------------
 
 
 def test_method3_posterior_shows_the_ravine():
@@ -440,14 +310,3 @@ def test_no_stray_warnings_on_a_clean_run(method4_set):
         warnings.simplefilter("error")
         infer(simulate(a=0.1, tau=1.0, design="method4", wavelengths=[500.0], eps=0.05, seed=1),
               progress=False, settings=FAST)
-
-
-def test_gaussian_moves_need_more_walkers_than_parameters():
-    """The Gaussian proposal's covariance comes from n_walkers / 2 walkers: "auto" falls back
-    to DE moves when they do not outnumber the parameters by two; an explicit choice errs."""
-    settings = InferenceSettings()  # 16 walkers: 8 complementary
-    assert settings.move_mixture_for(6) == settings.move_mixture
-    assert all(kind != "gaussian" for kind, _ in settings.move_mixture_for(7))
-    with pytest.raises(ValueError, match="= 18 for 7 parameters"):
-        InferenceSettings(moves="gaussian").move_mixture_for(7)
-    assert json.loads(settings.to_json(7))["move_mixture"] == [["de", 0.8], ["snooker", 0.2]]

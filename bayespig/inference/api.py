@@ -1,0 +1,263 @@
+"""The entries: :func:`infer` (a measurement set) and :func:`infer_problem` (a problem)."""
+
+from __future__ import annotations
+
+import os
+import time
+import warnings
+
+import numpy as np
+
+from ..likelihood import ForwardModel, LogPosterior, Problem
+from .arguments import (
+    check_executor,
+    check_flag,
+    check_g,
+    check_method,
+    check_priors,
+    check_seed,
+    check_settings,
+    check_substrate_sd,
+    eps_argument,
+)
+from .card_factors import CardFactors, card_indices
+from .executors import _WORKER_TABLES, _Task, run_tasks
+from .outputs import _inference_data
+from .settings import ConvergenceWarning
+from .shared import pilot_draws, sample_joint
+
+__all__ = ["infer", "infer_problem"]
+
+
+def _resolve_eps(eps, measurements):
+    """``(eps for LogPosterior, mode)`` from the ``eps`` argument (checked by
+    :func:`~bayespig.inference.arguments.eps_argument`): None is the set's own ``eps`` (metadata,
+    e.g. a simulated set) or 0.05."""
+    eps = eps_argument(eps)
+    if eps == "infer":
+        return None, "inferred"
+    if eps is None:
+        metadata = getattr(measurements, "metadata", None) or {}
+        value = metadata.get("eps") if isinstance(metadata, dict) else None
+        eps = float(value) if isinstance(value, (int, float)) and value > 0 else 0.05
+    return eps, "known"
+
+
+def _check_eps_identifiable(problem, log_post0):
+    """Refuse an inferred ``eps`` where the wavelengths have no more values than parameters.
+
+    With ``n_values <= n_parameters`` (``a``, every ``tau``, ``g``) the point fit reproduces
+    the data exactly, the likelihood grows without bound as ``eps -> 0`` and the run would go
+    to ``max_steps`` at every band with nothing learned. ``n_values`` is the same at every
+    wavelength (every film is measured at all of them).
+    """
+    if not log_post0.infer_eps:
+        return
+    names = [name for name in log_post0.parameter_names if name != "log_eps"]
+    if problem.n_values > len(names):
+        return
+    shown = []
+    for name in names:
+        if name.startswith("log_tau["):
+            name = "tau" if log_post0.n_groups == 1 else name[len("log_"):]
+        shown.append(name)
+    wl = np.asarray(problem.wavelength_nm, dtype=float)
+    where = f"{wl.min():g} nm" if wl.size == 1 or wl.min() == wl.max() else f"{wl.min():g}–{wl.max():g} nm"
+    values = f"{problem.n_values} value{'s' if problem.n_values != 1 else ''}"
+    raise ValueError(f"eps cannot be inferred: at {where} there {'are' if problem.n_values != 1 else 'is'} "
+                     f"only {values} for {len(names)} parameter{'s' if len(names) != 1 else ''} "
+                     f"({', '.join(shown)}); give eps "
+                     "(e.g. eps=0.02, or --eps 0.02 on the command line)")
+
+
+def _point_starts(problem, g, tables, priors, log_post0, n_wavelengths):
+    """Point-fit starts ``[a, log tau.., (g), (log eps)]`` per wavelength, and the fit."""
+    from ..fit import FitSettings, fit_problem
+
+    fit_settings = FitSettings(tau_bounds=tuple(float(v) for v in priors.tau_range),
+                               a_bounds=tuple(float(v) for v in priors.a_range))
+    fit = fit_problem(problem, g=0.0, tables=tables, settings=fit_settings, warn=False)
+    columns = [fit.a[:, None], np.log(np.maximum(fit.tau, 1e-300))]
+    if g == "free":
+        columns.append(np.zeros((n_wavelengths, 1)))
+    if log_post0.infer_eps:
+        rms = np.clip(fit.rms_relative_deviation, priors.eps_range[0], priors.eps_range[1])
+        columns.append(np.log(rms)[:, None])
+    return np.concatenate(columns, axis=1), fit
+
+
+def _sample_shared(problem, model, priors, eps, settings, seed, specs, executor, progress):
+    """Joint run over all wavelengths with the shared parameters ``specs`` (:mod:`bayespig.inference.shared`).
+
+    The pilot is the per-wavelength run of the problem as given (the specs' nominal values,
+    e.g. every card at its stated albedo). Returns what :func:`~bayespig.inference.shared.sample_joint`
+    returns.
+    """
+    pilot_seed, joint_seed, start_seed = np.random.SeedSequence(int(seed)).spawn(3)
+    pilot = infer_problem(problem, seed=int(pilot_seed.generate_state(1)[0]), g="isotropic", eps=eps,
+                          executor=executor, progress=progress, priors=priors, settings=settings,
+                          tables=model.tables)
+    return sample_joint(model, specs, pilot_draws(pilot), priors, eps, settings, joint_seed, start_seed)
+
+
+def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, progress=True,
+                  priors=None, settings=None, tables=None, shared=None):
+    """Posterior samples of a :class:`~bayespig.likelihood.Problem` at every wavelength.
+
+    Parameters as :func:`infer`, except ``eps``: a positive number (known, for films without
+    their own) or None (inferred); ``tables`` optionally passes look-up tables
+    (instrument -> table) for the point fit and serial runs; ``shared``: parameters shared
+    over wavelengths, a sequence of :class:`~bayespig.inference.shared.SharedParameter` specs
+    (e.g. :class:`~bayespig.inference.card_factors.CardFactors`), sampled jointly with every
+    wavelength's parameters.
+
+    Returns
+    -------
+    arviz.InferenceData
+        See the module docstring for the schema.
+    """
+    if not isinstance(problem, Problem):
+        raise TypeError(f"problem must be a bayespig.likelihood.Problem, got {type(problem).__name__}")
+    g, seed = check_g(g), check_seed(seed)
+    if eps is not None:
+        eps = eps_argument(eps)
+        if eps == "infer":
+            raise ValueError("eps must be a number in (0, 1) or None (inferred) for infer_problem, got 'infer'")
+    check_executor(executor)
+    progress = check_flag("progress", progress)
+    priors, settings = check_priors(priors), check_settings(settings)
+    started = time.perf_counter()
+    tables = {} if tables is None else tables
+    model = ForwardModel(problem, g=g, tables=tables)
+    log_post0 = LogPosterior(model, 0, priors, g=g, eps=eps)
+    _check_eps_identifiable(problem, log_post0)
+    n_wl = problem.n_wavelengths
+    starts, fit = _point_starts(problem, g, model.tables, priors, log_post0, n_wl)
+    joint = None
+    shared = tuple(shared) if shared is not None else ()
+    if shared:
+        if g != "isotropic" or eps is None:
+            raise ValueError(f"{' and '.join(spec.title for spec in shared)} need g='isotropic' and a known eps")
+        results, shared_draws, settings, joint = _sample_shared(
+            problem, model, priors, eps, settings, seed, shared, executor, progress)
+    else:
+        seeds = np.random.SeedSequence(int(seed)).spawn(n_wl)
+        # the stacks of wavelengths sampled together depend on the settings only (never on the
+        # executor), so the samples do not depend on how the tasks are run
+        per_run = settings.wavelengths_per_run
+        tasks = [_Task(problem, g, eps, priors, settings, tuple(range(i, min(i + per_run, n_wl))),
+                       starts[i:i + per_run], tuple(seeds[i:i + per_run]))
+                 for i in range(0, n_wl, per_run)]
+        if executor is None and len(tasks) == 1:  # runs here: the tables loaded for the point fit
+            _WORKER_TABLES.setdefault((g, problem.n), {}).update(model.tables)
+        chunks = run_tasks(tasks, executor, progress)
+        results = [r for chunk in chunks for r in chunk]
+
+    idata = _inference_data(problem, model, results, settings, log_post0, fit, seed=seed, g=g, eps=eps,
+                            priors=priors, wall_time=time.perf_counter() - started,
+                            shared=list(zip(shared, shared_draws)) if joint is not None else [])
+    wavelength = np.asarray(problem.wavelength_nm, dtype=float)
+    capped = [w for w, r in zip(wavelength, results) if r["max_steps_reached"]]
+    if capped and joint is not None:
+        warnings.warn(f"the joint run with {' and '.join(spec.title for spec in shared)} was capped at "
+                      f"max_steps={settings.max_steps} "
+                      f"before reaching {settings.min_autocorr_multiple:g} autocorrelation times / ESS "
+                      f"{settings.target_ess:g}", ConvergenceWarning, stacklevel=2)
+    elif capped:
+        warnings.warn(
+            f"run length capped at max_steps={settings.max_steps} before reaching "
+            f"{settings.min_autocorr_multiple:g} autocorrelation times / ESS {settings.target_ess:g} at "
+            + ", ".join(f"{w:g} nm" for w in capped), ConvergenceWarning, stacklevel=2)
+    return idata
+
+
+def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, executor=None,
+          progress=True, priors=None, settings=None, substrate_sd=None):
+    """Posterior of ``a`` and ``tau`` (and ``g``, ``eps``) per wavelength from a measurement set.
+
+    Parameters
+    ----------
+    measurements : MeasurementSet or path
+        A set, or a file read with :func:`bayespig.read_measurements`.
+    method : {"auto", "method1", "method2", "method3", "method4", "general", 1, 2, 3, 4}
+        The paper's method (section 3) whose samples enter the likelihood; ``"auto"`` picks the
+        most robust one the samples support (4, 1, 2, 3), else ``"general"`` (every film).
+    seed : int
+        Seeds every random draw (bit-for-bit reproducible, whatever the executor).
+    g : {"isotropic", "free"}
+        ``g = 0`` (the paper's recommendation) or ``g`` a parameter, uniform on the prior's
+        range (needs look-up tables with a ``g`` axis).
+    eps : float, "infer" or None
+        Relative measurement error of eq. (7) [-] for samples without their own: known, in
+        (0, 1) (default: the set's metadata ``eps`` when it has one, e.g. a simulated set, else
+        0.05), or ``"infer"``: one ``eps`` per wavelength shared by those samples, log-uniform
+        prior (needs more values per wavelength than parameters).
+    executor : concurrent.futures.Executor, optional
+        Runs the wavelengths in parallel (``submit``); e.g. a ``dask.distributed`` client's
+        ``get_executor()``. Default: a local pool of 2 processes (serial for a single stack of
+        ``settings.wavelengths_per_run`` wavelengths).
+    progress : bool
+        Progress bar over wavelengths.
+    priors : Priors, optional
+        Default: ``a`` uniform on [0, 1], ``tau`` log-uniform on [0.01, 100], ``g`` uniform on
+        [-0.5, 0.8], ``eps`` log-uniform on [0.001, 0.5].
+    settings : InferenceSettings, optional
+    substrate_sd : float, optional
+        Treat every card's albedo seen from the binder as uncertain: ``r_s = f_card r_s,card``
+        with one factor per card shared by all wavelengths, ``log f ~ N(0, substrate_sd^2)``
+        (e.g. 0.1 for the ~10 % of the paper's section 3.4). The posterior is then joint over
+        all wavelengths (:mod:`bayespig.inference.card_factors`; slower: one run of
+        ``n_wavelengths * (1 + groups) + cards`` parameters) and holds ``r_s_factor`` over
+        ``(chain, draw, card)``. Needs ``g="isotropic"`` and a known ``eps``.
+
+    Returns
+    -------
+    arviz.InferenceData
+        Posterior ``a``, ``tau`` (chain, draw, wavelength) and the rest of the schema in the
+        module docstring.
+
+    Raises
+    ------
+    TypeError, ValueError
+        For an argument of the wrong kind or value (the message names it), and for
+        ``eps="infer"`` where a wavelength has no more values than parameters.
+    ValueError, MeasurementError
+        For a file that cannot be read or a method the samples do not support.
+    KeyboardInterrupt
+        Re-raised once after the workers have been stopped.
+
+    Warns
+    -----
+    ConvergenceWarning
+        When a run reached ``settings.max_steps`` before its length criterion.
+
+    References
+    ----------
+    Ershov, Voloboy & Pozdnyakov (2023), eq. (7), section 3.
+    """
+    from ..data import MeasurementSet, read_measurements
+
+    # every argument is checked before any file is read or any sample drawn
+    method, seed, g = check_method(method), check_seed(seed), check_g(g)
+    eps = eps_argument(eps)
+    check_executor(executor)
+    progress = check_flag("progress", progress)
+    priors, settings = check_priors(priors), check_settings(settings)
+    substrate_sd = check_substrate_sd(substrate_sd)
+    if substrate_sd is not None and (g != "isotropic" or eps == "infer"):
+        raise ValueError("substrate_sd needs g='isotropic' and a known eps (the joint run over all "
+                         "wavelengths does not sample g or eps)")
+    if not isinstance(measurements, MeasurementSet):
+        if isinstance(measurements, (str, os.PathLike)):
+            measurements = read_measurements(measurements)
+        else:
+            raise TypeError("measurements must be a MeasurementSet or a path, "
+                            f"got {type(measurements).__name__}")
+    eps_value, _ = _resolve_eps(eps, measurements)
+    problem = Problem.from_measurements(measurements, method)
+    shared = []
+    if substrate_sd is not None:
+        cards, card_index = card_indices(measurements, problem)
+        shared.append(CardFactors(problem, card_index, substrate_sd, cards))
+    return infer_problem(problem, seed=seed, g=g, eps=eps_value, executor=executor,
+                         progress=progress, priors=priors, settings=settings, shared=shared)

@@ -1,0 +1,145 @@
+"""Checks of the arguments of :func:`bayespig.infer` and :func:`bayespig.inference.infer_problem`.
+
+Each check raises one :class:`TypeError` (wrong kind of value) or :class:`ValueError` (right
+kind, impossible value) whose message names the argument, says what is expected and shows what
+was given; it runs before any file is read or any sample drawn.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+from ..likelihood import Priors
+from .settings import InferenceSettings
+
+__all__ = [
+    "EPS_RANGE",
+    "check_executor",
+    "check_flag",
+    "check_g",
+    "check_method",
+    "check_priors",
+    "check_seed",
+    "check_settings",
+    "check_substrate_sd",
+    "eps_argument",
+]
+
+#: Open interval of a known relative error ``eps`` [-]: a relative standard deviation of the
+#: measured values (eq. 7), 0.02 for 2 %; 1 or more would be noise as large as the signal.
+EPS_RANGE = (0.0, 1.0)
+#: The paper's methods as numbers and names.
+METHOD_NAMES = ("auto", "general", "method1", "method2", "method3", "method4")
+
+
+def _shown(value):
+    """``type value`` of a given argument, for the messages."""
+    text = repr(value)
+    if len(text) > 60:
+        text = text[:57] + "..."
+    return f"{type(value).__name__} {text}"
+
+
+def _is_number(value):
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def check_seed(seed):
+    """``seed`` as an int: a non-negative integer (not a bool)."""
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (numbers.Integral, np.integer)):
+        raise TypeError(f"seed must be a non-negative integer, got {_shown(seed)}")
+    if seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    return int(seed)
+
+
+def check_g(g):
+    """``g``: ``"isotropic"`` or ``"free"``."""
+    if not isinstance(g, str) or g not in ("isotropic", "free"):
+        raise ValueError(f"g must be 'isotropic' or 'free', got {g!r}")
+    return g
+
+
+def check_method(method):
+    """``method`` as the name :meth:`bayespig.likelihood.Problem.from_measurements` takes.
+
+    Accepts ``"auto"``, ``"general"``, ``"method1"`` ... ``"method4"``, and the numbers 1 ... 4
+    (int or their digits as str).
+    """
+    expected = "'auto', 'general', 'method1' ... 'method4' or 1 ... 4"
+    if isinstance(method, (bool, np.bool_)) or not isinstance(method, (str, numbers.Integral, np.integer)):
+        raise TypeError(f"method must be {expected}, got {_shown(method)}")
+    if isinstance(method, str) and method in ("1", "2", "3", "4"):
+        method = int(method)
+    if not isinstance(method, str):
+        if not 1 <= method <= 4:
+            raise ValueError(f"method must be {expected}, got {method!r}")
+        return f"method{int(method)}"
+    if method not in METHOD_NAMES:
+        raise ValueError(f"method must be {expected}, got {method!r}")
+    return method
+
+
+def eps_argument(eps):
+    """``eps``: None (the set's own or the default), ``"infer"``, or a float in :data:`EPS_RANGE`."""
+    low, high = EPS_RANGE
+    expected = f"a number in ({low:g}, {high:g}) (a relative error, e.g. 0.02 for 2 %), 'infer' or None"
+    if eps is None:
+        return None
+    if isinstance(eps, str):
+        if eps != "infer":
+            raise ValueError(f"eps must be {expected}, got {eps!r}")
+        return eps
+    if not _is_number(eps):
+        raise TypeError(f"eps must be {expected}, got {_shown(eps)}")
+    value = float(eps)
+    if not (np.isfinite(value) and low < value < high):
+        raise ValueError(f"eps must lie in ({low:g}, {high:g}) (a relative error, e.g. 0.02 for 2 %), "
+                         f"got {eps!r}")
+    return value
+
+
+def check_executor(executor):
+    """``executor``: None, or an object with a callable ``submit`` (``concurrent.futures``-style)."""
+    if executor is not None and not callable(getattr(executor, "submit", None)):
+        raise TypeError("executor must be None (a local pool of 2 processes) or a concurrent.futures-style "
+                        "executor with a submit method (e.g. ProcessPoolExecutor, a dask client's "
+                        f"get_executor()), got {_shown(executor)}")
+    return executor
+
+
+def check_flag(name, value):
+    """A bool argument (``True``/``False``, numpy's bools too)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {_shown(value)}")
+    return bool(value)
+
+
+def check_priors(priors):
+    """``priors``: None (the defaults) or a :class:`~bayespig.likelihood.Priors`."""
+    priors = Priors() if priors is None else priors
+    if not isinstance(priors, Priors):
+        raise TypeError(f"priors must be a bayespig.likelihood.Priors, got {type(priors).__name__}")
+    return priors
+
+
+def check_settings(settings):
+    """``settings``: None (the defaults) or an :class:`~bayespig.inference.InferenceSettings`."""
+    settings = InferenceSettings() if settings is None else settings
+    if not isinstance(settings, InferenceSettings):
+        raise TypeError(f"settings must be an InferenceSettings, got {type(settings).__name__}")
+    return settings
+
+
+def check_substrate_sd(substrate_sd):
+    """``substrate_sd``: None or a positive number (prior sd of ``log f``)."""
+    if substrate_sd is None:
+        return None
+    expected = "a positive number (the prior sd of log f, e.g. 0.1 for 10 %) or None"
+    if not _is_number(substrate_sd):
+        raise TypeError(f"substrate_sd must be {expected}, got {_shown(substrate_sd)}")
+    if not (np.isfinite(substrate_sd) and substrate_sd > 0):
+        raise ValueError(f"substrate_sd must be {expected}, got {substrate_sd!r}")
+    return float(substrate_sd)

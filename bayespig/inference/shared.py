@@ -1,0 +1,549 @@
+"""Parameters shared over wavelengths: one joint posterior and one sampler for all of them.
+
+Most parameters of a film belong to one wavelength (``a``, ``tau`` of every film group) and are
+sampled wavelength by wavelength (:mod:`bayespig.inference.sampler`). A parameter that is the
+same at every wavelength (a card's albedo factor, the surface roughness, the binder index, a
+film's thickness) couples the wavelengths: the posterior is then joint over all of them. This
+module is the one home for such parameters; each kind is a *spec* (a subclass of
+:class:`SharedParameter`) and :class:`JointLogPosterior` / :func:`sample_joint` handle any list
+of specs the same way. The card factors (:mod:`bayespig.inference.card_factors`) are the
+first spec.
+
+The joint posterior
+-------------------
+Parameters ``[a_λ (n_wl), log tau_λ,group (n_wl * G), phi (n_shared)]``: per wavelength the
+block ``theta_λ = [a, log tau_1..G]`` with the box priors of :class:`bayespig.likelihood.Priors`,
+and ``phi`` the concatenated sampled coordinates of the specs (e.g. ``log f`` per card), each
+spec with its own prior and box. The likelihood is eq. (7) with a known relative error ``eps``
+at every wavelength, the forward model evaluated with the specs' inputs (:meth:`SharedParameter.model_inputs`).
+
+Residual coordinates
+    Sampled are ``u = [r (n_wl * (1 + G)), phi]`` with ``theta = theta_hat + r + S (phi - phi_0)``:
+    ``theta_hat`` is the per-wavelength posterior median at the nominal ``phi_0`` (the pilot,
+    below) and ``S = d theta_hat / d phi`` its damped Gauss-Newton sensitivity to the shared
+    parameters (:meth:`JointLogPosterior._sensitivity`). The map is a translation for every
+    ``phi`` (unit Jacobian), so the density is the same in either coordinates; but a change of
+    ``phi`` at fixed ``r`` moves every wavelength's ``theta`` along with it, which is what the
+    data ask for. In ``u`` the wavelengths are independent given ``phi`` and only weakly coupled
+    to it.
+Block-wise moves
+    :class:`BlockwiseMove`: every wavelength's block by differential evolution, each block
+    accepted on its own likelihood term (given ``phi`` the wavelengths are independent), then
+    the shared block on the whole log-posterior; a share :data:`JOINT_DE_WEIGHT` of
+    whole-vector DE moves follows the correlations the residual coordinates leave.
+Pilot start
+    :func:`sample_joint` takes a per-wavelength run at ``phi = phi_0`` (the usual
+    :func:`bayespig.inference.infer_problem`), uses its medians as ``theta_hat``, and starts the
+    walkers on its draws (picked independently per wavelength) with ``phi`` in a small ball
+    around ``phi_0``.
+Run length, diagnostics
+    Those of the per-wavelength runs (:func:`bayespig.inference.sampler._sample_stack`) on the
+    joint vector, one vectorised table call per half-step for every wavelength of every walker.
+
+Adding a shared parameter
+-------------------------
+A spec says, for its coordinates: their names (``labels``, one posterior variable
+``variable`` over the dimension ``dimension``), the box of the sampled coordinate
+(``lower``, ``upper``), the nominal value of the pilot (``nominal``) and the start spread
+(``start_sd``), the prior (:meth:`~SharedParameter.log_prior`), the transform to the stored
+physical value (:meth:`~SharedParameter.physical`), and how it enters the forward model at
+every wavelength (:meth:`~SharedParameter.model_inputs`: keyword arrays of the
+per-wavelength model, :class:`bayespig.likelihood.WavelengthModel`, which must accept them:
+a new keyword there, and the tables behind it, is the forward-model side of a new spec). The
+pilot runs the problem as given, so ``nominal`` is the value the problem implies without the
+spec (``f = 1`` for a card, the roughness the problem is built with). Nothing else changes. The
+parameters the open issues need, each one spec:
+
+Roughness (issue 16)
+    One coordinate ``log alpha`` per film (or per film group, or one for the set), prior
+    log-uniform (or a half-normal in ``alpha``) on the tables' roughness range, physical value
+    ``alpha``; :meth:`~SharedParameter.model_inputs` gives a ``roughness`` keyword (per row,
+    per reflectance film) that the per-wavelength model interpolates along the tables'
+    roughness axis, as it does ``r_s_scale`` for the card factors. ``roughness=number`` keeps
+    it fixed (no spec).
+Binder index ``n`` (issue 16)
+    One coordinate ``n``, prior ``N(1.45, 0.05^2)`` truncated to the tables' ``n`` range; it
+    enters every film (the interface's Fresnel terms and the card albedo seen from the binder,
+    :func:`bayespig.physics.substrate.substrate_albedo_from_air`) through an ``n`` keyword of the
+    per-wavelength model (tables with an ``n`` axis).
+Film thickness (issue 17)
+    One coordinate ``log h`` per film, prior normal around a measured thickness (or flat when
+    none), physical value ``h``; it enters through a ``tau_scale`` keyword per film of the
+    per-wavelength model (``tau_film(λ) = h_film * tau_per_thickness(λ)``), so that the
+    per-wavelength block holds the optical thickness per unit film thickness. For a pigment
+    library the block becomes the pigments' constants (``a_i``, ``k_i`` per wavelength, films
+    mixed by their recipes): the block layout (``[a, log tau_1..G]`` per wavelength in
+    :class:`JointLogPosterior` today) is then the one part to generalise; the residual
+    coordinates, the moves and the pilot start do not depend on what a block holds. One
+    thickness is fixed (or has an informative prior) so that ``h * k`` stays identifiable.
+
+Several specs at once (card factors and roughness) concatenate their coordinates in ``phi``
+and are moved together in the shared block.
+
+References
+----------
+Ershov, Voloboy & Pozdnyakov (2023), eq. (7), section 3.4. Foreman-Mackey et al. (2013),
+emcee's red-blue update; ter Braak (2006), differential evolution.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..likelihood import Priors, multiplicative_normal_logpdf
+from .moves import IndependentEnsemblesMove, ensemble_halves
+from .sampler import _sample_stack
+
+__all__ = [
+    "JOINT_DE_WEIGHT",
+    "SENSITIVITY_DAMPING",
+    "BlockwiseMove",
+    "JointLogPosterior",
+    "SharedParameter",
+    "pilot_draws",
+    "sample_joint",
+]
+
+#: Levenberg-Marquardt damping (relative to the mean eigenvalue of J^T J) of the blocks'
+#: sensitivity to the shared parameters: in a ravine the undamped Gauss-Newton step along the
+#: ravine is huge and only valid for tiny changes. Any sensitivity gives a valid sampler (it is a
+#: change of coordinates with unit Jacobian); this one only sets how well the shared moves mix.
+SENSITIVITY_DAMPING = 1e-3
+#: Share of whole-vector DE moves among the block moves of the joint run: they follow
+#: correlations between the blocks that the residual coordinates leave.
+JOINT_DE_WEIGHT = 0.2
+
+
+class SharedParameter:
+    """Interface of one kind of parameter shared by all wavelengths (a spec; see the module docstring).
+
+    Subclasses set the attributes and implement the methods below.
+
+    Attributes
+    ----------
+    title : str
+        What the parameters are, in words (e.g. ``"substrate factors"``; in messages).
+    variable, dimension : str
+        Posterior variable of the physical values and its dimension (e.g. ``"r_s_factor"``
+        over ``"card"``).
+    long_name, units : str
+        The posterior variable's netCDF attributes (``units="1"``: dimensionless).
+    labels : tuple of str
+        One per coordinate (the dimension's coordinate values).
+    coordinate_name : str
+        Name of the sampled coordinate in ``parameter_names`` (e.g. ``"log_r_s_factor"``).
+    lower, upper : numpy.ndarray
+        Box of the sampled coordinates (the prior's support), shape (size,).
+    nominal : numpy.ndarray
+        Value of the pilot run (e.g. ``log f = 0``), inside the box.
+    start_sd : numpy.ndarray
+        Spread of the walkers' start around ``nominal`` in the sampled coordinate.
+    attribute : str or None
+        Name of the InferenceData attribute holding :meth:`describe` as JSON.
+    """
+
+    title = "shared parameters"
+    variable = dimension = coordinate_name = long_name = ""
+    units = "1"
+    attribute = None
+
+    @property
+    def size(self):
+        """Number of sampled coordinates."""
+        return len(self.labels)
+
+    def log_prior(self, x):
+        """Log prior density (up to a constant) of sampled coordinates ``x`` (W, size), shape (W,)."""
+        raise NotImplementedError
+
+    def physical(self, x):
+        """Stored physical values of ``x`` (W, size) (e.g. ``f = exp(log f)``)."""
+        raise NotImplementedError
+
+    def model_inputs(self, x):
+        """Keyword arrays of the per-wavelength model, one row per row of ``x`` (W, size)."""
+        raise NotImplementedError
+
+    def describe(self):
+        """The prior and the labels as a JSON-able dict (provenance)."""
+        raise NotImplementedError
+
+
+class JointLogPosterior:
+    """Joint log-posterior over all wavelengths with parameters shared by them.
+
+    Sampled in the residual coordinates of the module docstring,
+    ``u = [r_a (n_wl), r_log_tau (n_wl * G), phi (n_shared)]``. The interface of
+    :class:`bayespig.likelihood.LogPosterior` (``n_dim``, ``parameter_names``,
+    ``in_support``, call on ``u`` of shape (W, n_dim)), so that the sampler of the
+    per-wavelength runs runs it with its run-length rule and diagnostics.
+
+    Parameters
+    ----------
+    model : ForwardModel
+        Isotropic.
+    theta_hat : numpy.ndarray
+        Centre per wavelength ``[a, log tau_1..G]``, shape (n_wavelengths, 1 + G) (the pilot's
+        medians, :func:`pilot_draws`).
+    specs : sequence of SharedParameter
+    priors : Priors, optional
+        Ranges of ``a`` and ``tau`` (default :class:`~bayespig.likelihood.Priors`).
+    eps : float
+        Known relative measurement error of eq. (7) for films without their own [-].
+    """
+
+    def __init__(self, model, theta_hat, specs, priors=None, eps=0.01):
+        priors = Priors() if priors is None else priors
+        specs = tuple(specs)
+        if model.g != "isotropic":
+            raise ValueError(f"{' and '.join(s.title for s in specs) or 'shared parameters'} are "
+                             "implemented for isotropic scattering (g fixed at 0)")
+        if not (np.isfinite(eps) and eps > 0):
+            raise ValueError(f"eps must be a positive number, got {eps!r}")
+        if not specs or any(not isinstance(s, SharedParameter) for s in specs):
+            raise TypeError("specs must be a non-empty sequence of SharedParameter")
+        problem = model.problem
+        self.model = model
+        self.specs = specs
+        self.priors = priors
+        self.n_wavelengths = n_wl = problem.n_wavelengths
+        self.n_groups = G = len(problem.groups)
+        self.evaluate = model.at_wavelength(list(range(n_wl)))
+        self.observed = np.stack([problem.observed(i) for i in range(n_wl)])
+        self.eps = problem.known_eps(eps)
+        self.n_shared = sum(s.size for s in specs)
+        self.shared_lower = np.concatenate([np.asarray(s.lower, dtype=float) for s in specs])
+        self.shared_upper = np.concatenate([np.asarray(s.upper, dtype=float) for s in specs])
+        self.shared_nominal = np.concatenate([np.asarray(s.nominal, dtype=float) for s in specs])
+        self.theta_lower = np.concatenate([np.full(n_wl, priors.a_range[0]),
+                                           np.full(n_wl * G, np.log(priors.tau_range[0]))])
+        self.theta_upper = np.concatenate([np.full(n_wl, priors.a_range[1]),
+                                           np.full(n_wl * G, np.log(priors.tau_range[1]))])
+        theta_hat = np.asarray(theta_hat, dtype=float).reshape(n_wl, 1 + G)
+        self.theta_hat = np.concatenate([theta_hat[:, 0], theta_hat[:, 1:].reshape(-1)])
+        self.theta_hat = np.clip(self.theta_hat, self.theta_lower, self.theta_upper)
+        n_theta = n_wl * (1 + G)
+        #: Coordinates of each wavelength's block in ``u`` (n_wl, 1 + G), and of the shared block.
+        self.blocks = np.concatenate([np.arange(n_wl)[:, None],
+                                      n_wl + np.arange(n_wl * G).reshape(n_wl, G)], axis=1)
+        self.shared_slice = slice(n_theta, n_theta + self.n_shared)
+        #: Each spec's coordinates within ``phi``.
+        self.spec_slices = []
+        start = 0
+        for spec in specs:
+            self.spec_slices.append(slice(start, start + spec.size))
+            start += spec.size
+        self.sensitivity = self._sensitivity()  # (n_wl * (1 + G), n_shared)
+        # a box holding the support in u (for the sampler's start ball and straggler moves)
+        reach = np.abs(self.sensitivity) @ np.maximum(np.abs(self.shared_lower - self.shared_nominal),
+                                                      np.abs(self.shared_upper - self.shared_nominal))
+        self.lower = np.concatenate([self.theta_lower - self.theta_hat - reach, self.shared_lower])
+        self.upper = np.concatenate([self.theta_upper - self.theta_hat + reach, self.shared_upper])
+        wl = [f"{w:g}" for w in problem.wavelength_nm]
+        self.parameter_names = tuple([f"r_a[{w}]" for w in wl]
+                                     + [f"r_log_tau[{w},{g}]" for w in wl for g in problem.groups]
+                                     + [f"{s.coordinate_name}[{label}]" for s in specs for label in s.labels])
+
+    @property
+    def n_dim(self):
+        """Number of parameters."""
+        return self.n_wavelengths * (1 + self.n_groups) + self.n_shared
+
+    def _model_inputs(self, phi):
+        """The specs' keyword arrays of the per-wavelength model, one row per row of ``phi``."""
+        inputs = {}
+        for spec, part in zip(self.specs, self.spec_slices):
+            for key, value in spec.model_inputs(phi[:, part]).items():
+                if key in inputs:
+                    raise ValueError(f"two shared parameters set the model input {key!r}")
+                inputs[key] = value
+        return inputs
+
+    def _predict_theta(self, theta, phi):
+        """Values of every wavelength, (W, n_wl, n_values), from physical ``theta`` and ``phi``."""
+        n_wl, G = self.n_wavelengths, self.n_groups
+        W = theta.shape[0]
+        a = theta[:, :n_wl]
+        tau = np.exp(theta[:, n_wl:]).reshape(W, n_wl, G)
+        member = np.tile(np.arange(n_wl), W)
+        inputs = {key: np.repeat(value, n_wl, axis=0) for key, value in self._model_inputs(phi).items()}
+        values = self.evaluate(a.reshape(-1), tau.reshape(W * n_wl, G), None, member=member, **inputs)
+        return values.reshape(W, n_wl, -1)
+
+    def _sensitivity(self, step=1e-4):
+        """``d theta_hat / d phi`` per wavelength by Gauss-Newton on the weighted residuals.
+
+        ``S = -(J_theta^T J_theta)^+ J_theta^T J_phi`` with ``J`` the derivatives of the
+        residuals ``(x_obs / x_model - 1) / eps`` (central differences at ``phi_0``), damped by
+        :data:`SENSITIVITY_DAMPING`; directions the data do not constrain (e.g. ``tau`` of a
+        film that hides its card) get no shift.
+        """
+        n_wl, G, C = self.n_wavelengths, self.n_groups, self.n_shared
+        base = np.concatenate([self.theta_hat, self.shared_nominal])
+        inner = np.clip(base[:-C], self.theta_lower + step, self.theta_upper - step)
+        base[:-C] = inner
+        steps = np.eye(base.size) * step
+        points = np.concatenate([base + steps, base - steps])
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            values = self._predict_theta(points[:, :-C], points[:, -C:])
+            residual = (self.observed / values - 1.0) / self.eps
+        derivative = (residual[:base.size] - residual[base.size:]) / (2.0 * step)  # (n_dim, n_wl, n_values)
+        derivative = np.nan_to_num(derivative, nan=0.0, posinf=0.0, neginf=0.0)
+        out = np.zeros((n_wl * (1 + G), C))
+        for i in range(n_wl):
+            rows = np.concatenate([[i], n_wl + i * G + np.arange(G)])
+            J_theta = derivative[rows, i].T  # (n_values, 1 + G)
+            J_phi = derivative[-C:, i].T  # (n_values, C)
+            normal = J_theta.T @ J_theta
+            damping = SENSITIVITY_DAMPING * np.trace(normal) / normal.shape[0] + 1e-300
+            out[rows] = -np.linalg.solve(normal + damping * np.eye(normal.shape[0]), J_theta.T @ J_phi)
+        return out
+
+    def theta_of(self, u):
+        """Physical ``[a (n_wl), log tau (n_wl * G)]`` and the shared coordinates ``phi`` from ``u``."""
+        u = np.atleast_2d(u)
+        phi = u[:, self.shared_slice]
+        return self.theta_hat + u[:, :self.shared_slice.start] + (phi - self.shared_nominal) @ self.sensitivity.T, phi
+
+    def unpack(self, u):
+        """``a`` (W, n_wl), ``tau`` (W, n_wl, G), then each spec's physical values (W, size)."""
+        theta, phi = self.theta_of(u)
+        n_wl = self.n_wavelengths
+        physical = [spec.physical(phi[:, part]) for spec, part in zip(self.specs, self.spec_slices)]
+        return (theta[:, :n_wl], np.exp(theta[:, n_wl:]).reshape(-1, n_wl, self.n_groups), *physical)
+
+    def _shared_inside(self, phi):
+        return ((phi >= self.shared_lower) & (phi <= self.shared_upper)).all(axis=1)
+
+    def in_support(self, u):
+        """Boolean mask of parameter vectors inside the prior's support."""
+        theta, phi = self.theta_of(u)
+        return ((theta >= self.theta_lower) & (theta <= self.theta_upper)).all(axis=1) & self._shared_inside(phi)
+
+    def predict(self, u):
+        """Predicted values of every wavelength, shape (W, n_wavelengths, n_values)."""
+        theta, phi = self.theta_of(u)
+        return self._predict_theta(theta, phi)
+
+    def log_likelihood(self, u):
+        """Pointwise log-likelihood of eq. (7), shape (W, n_wavelengths, n_values)."""
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            return multiplicative_normal_logpdf(self.observed, self.predict(u), self.eps)
+
+    def wavelength_terms(self, u):
+        """Log-likelihood of each wavelength, (W, n_wl); ``-inf`` where its ``(a, tau)`` or
+        ``phi`` leave the prior's box."""
+        u = np.atleast_2d(np.asarray(u, dtype=float))
+        theta, phi = self.theta_of(u)
+        n_wl, G = self.n_wavelengths, self.n_groups
+        inside = (theta >= self.theta_lower) & (theta <= self.theta_upper)
+        block_ok = inside[:, :n_wl] & inside[:, n_wl:].reshape(-1, n_wl, G).all(axis=2)
+        block_ok &= self._shared_inside(phi)[:, None]
+        terms = np.full((u.shape[0], n_wl), -np.inf)
+        rows = block_ok.any(axis=1)
+        if rows.any():
+            safe = np.clip(theta[rows], self.theta_lower, self.theta_upper)
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                values = multiplicative_normal_logpdf(self.observed, self._predict_theta(safe, phi[rows]),
+                                                      self.eps).sum(axis=2)
+            values[~np.isfinite(values)] = -np.inf
+            terms[rows] = np.where(block_ok[rows], values, -np.inf)
+        return terms
+
+    def log_prior_shared(self, u):
+        """Log-density of the shared parameters' priors (up to a constant), (W,)."""
+        phi = np.atleast_2d(u)[:, self.shared_slice]
+        total = self.specs[0].log_prior(phi[:, self.spec_slices[0]])
+        for spec, part in zip(self.specs[1:], self.spec_slices[1:]):
+            total = total + spec.log_prior(phi[:, part])
+        return total
+
+    def __call__(self, u, member=None):
+        """Log-posterior (up to a constant), shape (W,); ``member`` is ignored (one joint problem)."""
+        u = np.atleast_2d(np.asarray(u, dtype=float))
+        return self.log_prior_shared(u) + self.wavelength_terms(u).sum(axis=1)
+
+
+class BlockwiseMove:
+    """Red-blue ensemble update of a :class:`JointLogPosterior`, block by block.
+
+    Within each of ``n_ensembles`` independent ensembles (one arviz chain each, as
+    :class:`bayespig.inference.IndependentEnsemblesMove`), every walker of one half is updated
+    from the other half in two steps:
+
+    1. every wavelength's block ``(r_a, r_log_tau)`` by a differential-evolution proposal
+       (ter Braak 2006; ``gamma = 2.38 / sqrt(2 d_block)``) from the block's values in two
+       walkers of the other half, each block accepted or rejected **on its own** with its own
+       likelihood term: given ``phi`` the wavelengths are independent, so the joint kernel is
+       the product of the blocks' Metropolis kernels;
+    2. the shared coordinates ``phi`` by the same proposal in their block, accepted on the
+       whole log-posterior.
+
+    Mixing is then that of a few-parameter problem per block instead of one of
+    ``n_wavelengths * (1 + G) + n_shared`` dimensions. Both proposals are symmetric and depend
+    on the other half only, so detailed balance holds (Foreman-Mackey et al. 2013).
+
+    Parameters
+    ----------
+    log_post : JointLogPosterior
+    n_ensembles : int
+    """
+
+    def __init__(self, log_post, n_ensembles):
+        self.log_post = log_post
+        self.n_ensembles = int(n_ensembles)
+        self.frozen = None  # the interface of IndependentEnsemblesMove (one member: never frozen)
+
+    def tune(self, state, accepted):
+        """No tuning (emcee's interface)."""
+
+    @staticmethod
+    def _de_step(s, c, columns, random):
+        """DE proposals of the coordinates ``columns`` (..., k) for walkers ``s`` (E, h, d) from ``c``."""
+        n_ens, h, _ = s.shape
+        m = c.shape[1]
+        shape = (n_ens, h) + columns.shape[:-1]
+        first = random.randint(0, m, size=shape)
+        second = random.randint(0, m - 1, size=shape)
+        second += second >= first
+        ens = np.arange(n_ens).reshape((n_ens,) + (1,) * (len(shape) - 1))
+        d = columns.shape[-1]
+        gamma = 2.38 / np.sqrt(2.0 * d) * (1.0 + 1e-5 * random.randn(*shape))
+        diff = c[ens[..., None], first[..., None], columns] - c[ens[..., None], second[..., None], columns]
+        return gamma[..., None] * diff
+
+    def propose(self, model, state):
+        """One red-blue update of every walker of every ensemble (emcee's Move interface)."""
+        lp = self.log_post
+        n_total, n_dim = state.coords.shape
+        random = model.random
+        accepted = np.zeros(n_total, dtype=bool)
+        shared_columns = np.arange(lp.shared_slice.start, lp.shared_slice.stop)
+        for active, other in ensemble_halves(n_total, self.n_ensembles, random, owner=type(self).__name__):
+            s, c = state.coords[active], state.coords[other]
+            index = active.reshape(-1)
+            current = s.reshape(-1, n_dim)
+            # 1. wavelength blocks, each accepted on its own term
+            q = current.copy()
+            step = self._de_step(s, c, lp.blocks, random).reshape(index.size, *lp.blocks.shape)
+            q[:, lp.blocks] += step
+            old_terms, new_terms = lp.wavelength_terms(current), lp.wavelength_terms(q)
+            with np.errstate(invalid="ignore"):
+                take = new_terms - old_terms > np.log(random.rand(*new_terms.shape))
+            moved = current.copy()
+            moved_cols = np.where(take[..., None], q[:, lp.blocks], current[:, lp.blocks])
+            moved[:, lp.blocks] = moved_cols
+            terms = np.where(take, new_terms, old_terms)
+            # 2. the shared block, on the whole log-posterior
+            q = moved.copy()
+            q[:, shared_columns] += self._de_step(s, c, shared_columns[None], random).reshape(index.size, -1)
+            before = lp.log_prior_shared(moved) + terms.sum(axis=1)
+            after = lp(q)
+            with np.errstate(invalid="ignore"):
+                ok = after - before > np.log(random.rand(index.size))
+            moved[ok] = q[ok]
+            state.coords[index] = moved
+            state.log_prob[index] = np.where(ok, after, before)
+            accepted[index] = ok | take.any(axis=1)
+        return state, accepted
+
+
+def pilot_draws(idata):
+    """Every pooled draw ``[a, log tau_1..G]`` per wavelength of a per-wavelength run.
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+        From :func:`bayespig.inference.infer_problem` (isotropic, at the nominal shared values).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (n_chains * n_draws, n_wavelengths, 1 + G).
+    """
+    a_pilot = np.asarray(idata.posterior["a"].values, dtype=float)
+    tau_pilot = (np.asarray(idata.posterior["tau_group"].values, dtype=float) if "tau_group" in idata.posterior
+                 else np.asarray(idata.posterior["tau"].values, dtype=float)[..., None])
+    draws = np.concatenate([a_pilot[..., None], np.log(tau_pilot)], axis=-1)  # (chain, draw, wl, 1 + G)
+    return draws.reshape(-1, *draws.shape[2:])
+
+
+def sample_joint(model, specs, draws, priors, eps, settings, joint_seed, start_seed):
+    """Joint run over all wavelengths with the shared parameters ``specs``, from a pilot.
+
+    Parameters
+    ----------
+    model : ForwardModel
+        Isotropic.
+    specs : sequence of SharedParameter
+    draws : numpy.ndarray
+        The pilot's draws (:func:`pilot_draws`): their medians are ``theta_hat``, and the walkers
+        start on them.
+    priors : Priors
+    eps : float
+        Known relative error [-].
+    settings : InferenceSettings
+        Walkers are raised to what the blocks need (a few per dimension of the largest block).
+    joint_seed, start_seed : numpy.random.SeedSequence
+        Seed the sampler, and the walkers' start.
+
+    Returns
+    -------
+    tuple
+        ``(records, shared, settings, joint)``: one record per wavelength in the form of the
+        per-wavelength runs (:func:`bayespig.inference.outputs._wavelength_outputs`); per spec
+        ``(draws (chain, draw, size), autocorrelation times (size,))``; the settings used; the
+        :class:`JointLogPosterior`.
+    """
+    theta_hat = np.median(draws, axis=0)
+    joint = JointLogPosterior(model, theta_hat, specs, priors, eps)
+    n_wl, G = joint.n_wavelengths, joint.n_groups
+    # blocks of 1 + G (a wavelength) and n_shared parameters: DE needs a few walkers per dimension
+    n_walkers = max(settings.n_walkers, 4 * max(1 + G, joint.n_shared), 6)
+    used = dataclasses.replace(settings, n_walkers=n_walkers + n_walkers % 2)
+    # walkers start on the pilot's draws (independently per wavelength) with phi ~ phi_0
+    rng = np.random.default_rng(start_seed)
+    n_total = used.n_ensembles * used.n_walkers
+    picked = draws[rng.integers(0, draws.shape[0], size=(n_total, n_wl)), np.arange(n_wl)]  # (n, wl, 1 + G)
+    residual = np.concatenate([picked[..., 0], picked[..., 1:].reshape(n_total, -1)], axis=1) - joint.theta_hat
+    spread = np.concatenate([np.asarray(s.start_sd, dtype=float) for s in joint.specs])
+    start = np.concatenate([residual, rng.normal(joint.shared_nominal, spread, (n_total, joint.n_shared))], axis=1)
+    start[:, joint.shared_slice] = np.clip(start[:, joint.shared_slice], joint.shared_lower, joint.shared_upper)
+    run = _sample_stack(joint, [joint], np.zeros((1, joint.n_dim)), used, [joint_seed],
+                        moves=[(BlockwiseMove(joint, used.n_ensembles), 1.0 - JOINT_DE_WEIGHT),
+                               (IndependentEnsemblesMove("de", used.n_ensembles), JOINT_DE_WEIGHT)],
+                        start_walkers=start)[0]
+    theta = run.pop("theta")
+    n_chains, n_draws, n_dim = theta.shape
+    flat = theta.reshape(-1, n_dim)
+    a, tau, *physical = joint.unpack(flat)
+    model_values = joint.predict(flat)  # (N, n_wl, n_values)
+    pointwise = joint.log_likelihood(flat)
+    noisy = None
+    if used.predictive_noise:
+        rng = np.random.default_rng(run["predictive_seed"])
+        noisy = model_values * (1.0 + joint.eps * rng.standard_normal(model_values.shape))
+    shape = (n_chains, n_draws)
+    autocorr = run["autocorr_time"]
+    records = []
+    for i in range(n_wl):
+        record = {
+            "a": a[:, i].reshape(shape),
+            "tau": tau[:, i].reshape(shape + (G,)),
+            "y": model_values[:, i].reshape(shape + (-1,)),
+            "log_likelihood": pointwise[:, i].reshape(shape + (-1,)),
+            "lp": pointwise[:, i].sum(axis=-1).reshape(shape),
+            "acceptance_rate": run["acceptance_rate"],
+            "autocorr_time": np.concatenate([[autocorr[i]], autocorr[n_wl + i * G:n_wl + (i + 1) * G]]),
+            "n_steps": run["n_steps"], "n_burn_in": run["n_burn_in"], "thin": run["thin"],
+            "max_steps_reached": run["max_steps_reached"],
+        }
+        if noisy is not None:
+            record["y_rep"] = noisy[:, i].reshape(shape + (-1,))
+        records.append(record)
+    shared_autocorr = autocorr[joint.shared_slice]
+    shared = [(values.reshape(shape + (spec.size,)), shared_autocorr[part])
+              for spec, values, part in zip(joint.specs, physical, joint.spec_slices)]
+    return records, shared, used, joint

@@ -1,0 +1,102 @@
+"""The joint machinery for parameters shared over wavelengths, with more than one spec."""
+
+import arviz as az
+import numpy as np
+import pytest
+from scipy import stats
+
+from bayespig.data import simulate
+from bayespig.inference import InferenceSettings, infer_problem
+from bayespig.inference.card_factors import CardFactorLogPosterior, CardFactors, card_indices
+from bayespig.inference.shared import JointLogPosterior, SharedParameter
+from bayespig.likelihood import ForwardModel, Priors, Problem
+
+from .common import MC_Z
+
+EPS = 0.01
+QUICK = InferenceSettings(target_ess=400.0, draws_per_chain=512, max_steps=20000)
+#: The unseen parameter's prior: normal with this sd, truncated at TRUNCATION sds.
+UNSEEN_SD, TRUNCATION = 0.5, 3.0
+
+
+class _Unseen(SharedParameter):
+    """A shared parameter no measured value depends on: its posterior is its prior."""
+
+    title = "unseen parameter"
+    variable = "unseen"
+    dimension = "unseen_index"
+    coordinate_name = "unseen"
+    long_name = "a parameter no value depends on"
+
+    def __init__(self):
+        self.labels = ("only",)
+        self.lower = np.array([-TRUNCATION * UNSEEN_SD])
+        self.upper = np.array([TRUNCATION * UNSEEN_SD])
+        self.nominal = np.zeros(1)
+        self.start_sd = np.array([0.01 * UNSEEN_SD])
+
+    def log_prior(self, x):
+        return -0.5 * np.sum((x / UNSEEN_SD) ** 2, axis=1)
+
+    def physical(self, x):
+        return x
+
+    def model_inputs(self, x):
+        return {}
+
+    def describe(self):
+        return {"sd": UNSEEN_SD}
+
+
+@pytest.fixture(scope="module")
+def film():
+    ms = simulate(a=np.array([0.3, 0.1]), tau=np.array([1.0, 1.5]), design="method4", instrument="multi-angle-45",
+                  wavelengths=[450.0, 650.0], eps=EPS, seed=4)
+    problem = Problem.from_measurements(ms, "method4")
+    return ms, problem, ForwardModel(problem, "isotropic", {})
+
+
+def test_two_specs_add_their_priors_and_concatenate_their_coordinates(film):
+    """[card factors, unseen]: the density is the card factors' one plus the unseen prior,
+    the unseen coordinate comes last and nothing depends on it."""
+    ms, problem, model = film
+    cards, index = card_indices(ms, problem)
+    theta_hat = np.array([[0.3, 0.0], [0.1, 0.4]])
+    cards_only = CardFactorLogPosterior(model, index, theta_hat, Priors(), EPS, 0.1, cards)
+    both = JointLogPosterior(model, theta_hat, [CardFactors(problem, index, 0.1, cards), _Unseen()], Priors(), EPS)
+    assert both.n_dim == cards_only.n_dim + 1
+    assert both.parameter_names == cards_only.parameter_names + ("unseen[only]",)
+    np.testing.assert_array_equal(both.sensitivity[:, -1], 0.0)
+    rng = np.random.default_rng(1)
+    u = np.concatenate([rng.normal(0, 0.01, (6, cards_only.n_dim)), rng.normal(0, UNSEEN_SD, (6, 1))], axis=1)
+    u[:, -1] = np.clip(u[:, -1], -1.4, 1.4)
+    expected = cards_only(u[:, :-1]) - 0.5 * (u[:, -1] / UNSEEN_SD) ** 2
+    np.testing.assert_allclose(both(u), expected, rtol=1e-12)
+    outside = u[:1].copy()
+    outside[0, -1] = 1.01 * TRUNCATION * UNSEEN_SD
+    assert both(outside)[0] == -np.inf
+    a, tau, factors, unseen = both.unpack(u)
+    for mine, reference in zip((a, tau, factors), cards_only.unpack(u[:, :-1])):
+        np.testing.assert_allclose(mine, reference, rtol=1e-12)
+    np.testing.assert_array_equal(unseen, u[:, -1:])
+
+
+def test_the_joint_sampler_runs_any_list_of_specs(film):
+    """infer_problem(shared=[card factors, unseen]): one joint run; the unseen parameter's
+    posterior is its truncated normal prior, stored with its attributes like r_s_factor."""
+    ms, problem, model = film
+    cards, index = card_indices(ms, problem)
+    idata = infer_problem(problem, seed=2, eps=EPS, progress=False, settings=QUICK, tables=model.tables,
+                          shared=[CardFactors(problem, index, 0.1, cards), _Unseen()])
+    post = idata.posterior
+    assert post["unseen"].dims == ("chain", "draw", "unseen_index")
+    assert post["unseen"].attrs["long_name"] == "a parameter no value depends on"
+    assert post["r_s_factor"].dims == ("chain", "draw", "card")
+    assert idata.sample_stats["unseen_autocorr_time"].dims == ("unseen_index",)
+    draws = post["unseen"].values[..., 0]
+    ess = float(az.ess(draws))
+    prior = stats.truncnorm(-TRUNCATION, TRUNCATION, scale=UNSEEN_SD)
+    assert abs(draws.mean() - prior.mean()) < MC_Z * prior.std() / np.sqrt(ess)
+    # sd of a sample sd ~ sd / sqrt(2 n_eff)
+    assert abs(draws.std() / prior.std() - 1.0) < MC_Z / np.sqrt(2.0 * ess)
+    assert float(az.rhat(draws)) < 1.01
