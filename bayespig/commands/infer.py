@@ -9,8 +9,16 @@ import warnings
 import numpy as np
 
 from .._atomic import atomic_path
-from ._arguments import INFER_METHODS as _METHODS
-from ._arguments import add_film_argument, add_substrate_argument, read_film
+from ._arguments import (
+    METHOD_HELP,
+    add_film_argument,
+    add_input_argument,
+    add_output_argument,
+    add_substrate_argument,
+    add_verbosity_arguments,
+    method_argument,
+    read_film,
+)
 
 __all__ = ["add_infer_parser", "run_infer"]
 
@@ -26,11 +34,14 @@ def add_infer_parser(subparsers):
         "InferenceData (DIR/posterior.nc) and a per-wavelength summary (DIR/summary.csv). "
         "Wavelengths that did not converge (R-hat > 1.01, ESS < 400) are listed.",
     )
-    parser.add_argument("measurements", help="measurement file (bayespig CSV, ASTM E1392, spectral table)")
-    parser.add_argument("--method", default="auto", choices=sorted(_METHODS),
-                        help="the paper's method whose samples enter the likelihood (default auto: "
-                             "the most robust one the samples support)")
-    parser.add_argument("--out", required=True, help="output directory")
+    add_input_argument(parser, "measurements",
+                       help="measurement file (bayespig CSV, ASTM E1392, wide spectral table)")
+    parser.add_argument("--method", default="auto", type=method_argument, metavar="METHOD",
+                        help=f"the paper's method whose samples enter the likelihood: {METHOD_HELP}, "
+                             "auto (default: the most robust one the samples support) or general "
+                             "(every sample)")
+    add_output_argument(parser, "--out", kind="folder", required=True,
+                        help="output folder (posterior.nc, summary.csv)")
     add_film_argument(parser)
     add_substrate_argument(parser)
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -43,7 +54,7 @@ def add_infer_parser(subparsers):
     parser.add_argument("--ensembles", type=int, default=None,
                         help="independent ensembles = arviz chains (default 4)")
     parser.add_argument("--max-steps", type=int, default=None, help="cap on steps per wavelength")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_verbosity_arguments(parser)
     parser.set_defaults(func=run_infer)
     return parser
 
@@ -78,11 +89,11 @@ def run_infer(args):
                                                  ("max_steps", args.max_steps)) if value is not None}
     settings = InferenceSettings(**overrides)
     if not os.path.exists(args.measurements):
-        raise ValueError(f"{args.measurements}: no such file")
+        raise ValueError(f"{args.measurements}: file not found")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ConvergenceWarning)
-        idata = infer(read_film(args.measurements, args.film), method=_METHODS[args.method], seed=args.seed,
-                      g=args.g, eps=eps, progress=not args.no_progress, settings=settings,
+        idata = infer(read_film(args.measurements, args.film), method=args.method, seed=args.seed,
+                      g=args.g, eps=eps, progress=args.verbosity >= 1, settings=settings,
                       substrate_sd=args.substrate_sd)
         flagged = diagnose(idata, warn=False)
     for warning in caught:

@@ -6,8 +6,16 @@ import os
 import sys
 import warnings
 
-from ._arguments import INFER_METHODS as _METHODS
-from ._arguments import add_film_argument, add_substrate_argument, read_film
+from ._arguments import (
+    METHOD_HELP,
+    add_film_argument,
+    add_input_argument,
+    add_output_argument,
+    add_substrate_argument,
+    add_verbosity_arguments,
+    method_argument,
+    read_film,
+)
 
 __all__ = ["add_demo_parser", "add_report_parser", "run_demo", "run_report"]
 
@@ -25,15 +33,16 @@ def add_report_parser(subparsers):
         "posterior.nc. Given a measurement file instead of a posterior (.nc), the posterior is "
         "inferred first (bayespig infer's defaults).",
     )
-    parser.add_argument("source", metavar="POSTERIOR_OR_MEASUREMENTS",
-                        help="posterior netCDF from 'bayespig infer' (.nc) or a measurement file")
-    parser.add_argument("--out", required=True, help="output directory")
-    parser.add_argument("--measurements", default=None,
-                        help="the measurement file of a posterior (thickness, concentration, truth)")
+    add_input_argument(parser, "source", metavar="POSTERIOR_OR_MEASUREMENTS",
+                       help="posterior netCDF from 'bayespig infer' (.nc) or a measurement file")
+    add_output_argument(parser, "--out", kind="folder", required=True,
+                        help="output folder (report.html, report.md, figures/, summary files)")
+    add_input_argument(parser, "--measurements", default=None,
+                       help="the measurement file of a posterior (thickness, concentration, truth)")
     add_film_argument(parser)
     add_substrate_argument(parser)
-    parser.add_argument("--method", default="auto", choices=sorted(_METHODS),
-                        help="when inferring: the paper's method (default auto)")
+    parser.add_argument("--method", default="auto", type=method_argument, metavar="METHOD",
+                        help=f"when inferring: the paper's method, {METHOD_HELP}, auto (default) or general")
     parser.add_argument("--seed", type=int, default=0, help="when inferring: random seed (default 0)")
     parser.add_argument("--g", default="isotropic", choices=("isotropic", "free"),
                         help="when inferring: g fixed at 0 (default) or a parameter")
@@ -42,7 +51,7 @@ def add_report_parser(subparsers):
     parser.add_argument("--illuminant", default=DEFAULT_ILLUMINANT,
                         help=f"colour-science illuminant name (default {DEFAULT_ILLUMINANT!r})")
     parser.add_argument("--title", default=None, help="report title")
-    parser.add_argument("--no-progress", action="store_true", help="no progress output")
+    add_verbosity_arguments(parser)
     parser.set_defaults(func=run_report)
     return parser
 
@@ -61,14 +70,14 @@ def run_report(args):
 
     if not os.path.exists(args.source):
         raise ValueError(f"{args.source}: no such file")
-    infer_kwargs = {"method": _METHODS[args.method], "seed": args.seed, "g": args.g,
+    infer_kwargs = {"method": args.method, "seed": args.seed, "g": args.g,
                     "substrate_sd": args.substrate_sd}
     source = read_film(args.source, args.film)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = write_report(source, args.out, measurements=args.measurements,
                               observer=args.observer, illuminant=args.illuminant, title=args.title,
-                              infer_kwargs=infer_kwargs, progress=not args.no_progress)
+                              infer_kwargs=infer_kwargs, progress=args.verbosity >= 1)
     _print_warnings(caught)
     _print_result(result)
     return 0
@@ -102,12 +111,12 @@ def add_demo_parser(subparsers):
         "same film on black and white, multi-angle-45 instrument, eps 0.05), infer its posterior "
         "and write the uncertainty report.",
     )
-    parser.add_argument("--out", default=str(DEFAULT_OUT_DIR),
-                        help=f"output directory (default {DEFAULT_OUT_DIR})")
+    add_output_argument(parser, "--out", kind="folder", default=str(DEFAULT_OUT_DIR),
+                        help=f"output folder (default {DEFAULT_OUT_DIR})")
     parser.add_argument("--seed", type=int, default=0, help="seed of the noise and the sampler (default 0)")
     parser.add_argument("--quick", action="store_true",
-                        help="shorter runs at every second wavelength (for tests)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress output")
+                        help="shorter runs at every third wavelength (for tests)")
+    add_verbosity_arguments(parser)
     parser.set_defaults(func=run_demo)
     return parser
 
@@ -120,7 +129,7 @@ def run_demo(args):
         raise ValueError(f"--seed must be a non-negative integer, got {args.seed}")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = demo(args.out, seed=args.seed, progress=not args.no_progress, quick=args.quick)
+        result = demo(args.out, seed=args.seed, progress=args.verbosity >= 1, quick=args.quick)
     _print_warnings(caught)
     _print_result(result)
     return 0

@@ -230,7 +230,7 @@ def test_executors_give_identical_results():
 
 def test_bad_arguments_raise_value_errors():
     for kwargs, match in (
-        ({"method": "method5"}, "method must be one of method1, method2, method3, method4"),
+        ({"method": "method5"}, "unknown method .method5.: method must be one of 1, 2, 3, 4, method1, method2, method3, method4$"),
         ({"a0": 1.5}, "a0"),
         ({"tau0": 0.0}, "tau0"),
         ({"tau0": 500.0}, "tau0 must be <= 128"),
