@@ -71,7 +71,8 @@ def check_output_path(path, kind="file"):
             raise ValueError(f"cannot write the output: '{path}' exists and is a file, not a folder")
         if not path.is_file() or not os.access(path, os.W_OK):
             raise ValueError(f"cannot write the output: '{path}' exists and cannot be replaced")
-    missing, parent = None, path.absolute().parent
+    # the folder output itself is created too; a file output creates its missing parents
+    missing, parent = (path.absolute() if kind == "folder" else None), path.absolute().parent
     while not (parent.exists() or parent.is_symlink()):
         missing, parent = parent, parent.parent
     if not parent.is_dir():

@@ -62,10 +62,11 @@ def revigo_folder(path=None):
 
     Raises
     ------
-    ValueError
+    MeasurementError
         When it does not exist: ``<folder>: file not found``, where it was looked for, where the
         data come from and how to point at them.
     """
+    from ..data.errors import MeasurementError, Problem
     from ..studies.revigo import default_revigo_path
 
     folder = Path(path) if path is not None else default_revigo_path()
@@ -77,8 +78,9 @@ def revigo_folder(path=None):
         where = "from $BAYESPIG_REVIGO"
     else:
         where = "the default, ../shared/data/revigo from the working folder"
-    raise ValueError(f"{folder}: file not found ({where}). The Revigo data are {REVIGO_SOURCE}; give "
-                     "their folder as 'bayespig revigo FOLDER' or set BAYESPIG_REVIGO=FOLDER")
+    raise MeasurementError(Problem(f"file not found ({where}). The Revigo data are {REVIGO_SOURCE}; give "
+                                   "their folder as 'bayespig revigo FOLDER' or set BAYESPIG_REVIGO=FOLDER",
+                                   file=str(folder)))
 
 
 def run_revigo(args):

@@ -22,6 +22,7 @@ import datetime
 import sys
 import time
 import warnings
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -37,7 +38,7 @@ _FIRST_LABEL_NM = 1000.0
 
 def _method_names(methods):
     """One method or a sequence of them, in any spelling -> tuple of ``"method1"`` .. ``"method4"``."""
-    one = isinstance(methods, (str, int, np.integer))
+    one = isinstance(methods, (str, int, np.integer)) or not isinstance(methods, Iterable)
     return tuple(method_name(m, also=()) for m in ((methods,) if one else methods))
 
 
@@ -91,7 +92,8 @@ def posterior_robustness(methods=PAPER_METHODS, a0_values=PAPER_A0, tau0_values=
     records = []
     for k, method in enumerate(methods):
         if progress:
-            print(f"posterior robustness: {method}, {len(pairs)} cases", file=sys.stderr, flush=True)
+            print(f"posterior robustness: {method}, {len(pairs)} case{'s' if len(pairs) != 1 else ''}",
+                  file=sys.stderr, flush=True)
         a = np.array([p[0] for p in pairs])
         tau = np.array([p[1] for p in pairs])
         measurements = simulate(a=a, tau=tau, design=method, instrument=instrument,

@@ -35,6 +35,7 @@ import platform
 import signal
 import sys
 import time
+from collections.abc import Iterable
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -526,8 +527,11 @@ def _run_cases(cases, executor, bar=None):
 
 def _method_names(method):
     """One method or a sequence of them, in any spelling (4, "4", "method4") -> tuple of names."""
-    one = isinstance(method, (str, int, np.integer))
-    return tuple(method_name(m, also=()) for m in ((method,) if one else method))
+    one = isinstance(method, (str, int, np.integer)) or not isinstance(method, Iterable)
+    names = tuple(method_name(m, also=()) for m in ((method,) if one else method))
+    if not names:
+        raise ValueError("method: no method given")
+    return names
 
 
 def _check_case_arguments(methods, a0_values, tau0_values, eps, n_repeat, seed):
