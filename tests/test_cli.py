@@ -218,20 +218,9 @@ def test_ctrl_c_during_a_real_infer_run(tmp_path):
     """SIGINT to ``bayespig infer`` on the bundled example once the sampler runs: exit 130, the
     one line on stderr (besides the progress bar), no traceback, no output folder."""
     out = tmp_path / "posterior"
-    env = {**os.environ, "PYTHONPATH": str(Path(bayespig.__file__).parents[1])}
     # more walkers and ensembles than the defaults: several seconds of sampling to interrupt
-    process = subprocess.Popen(
-        [sys.executable, "-c", "import sys; from bayespig.cli import main; sys.exit(main())", "infer",
-         str(EXAMPLE), "--out", str(out), "--ensembles", "16", "--walkers", "64"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
-    err = b""
-    deadline = time.monotonic() + 120
-    while b"inference:" not in err and time.monotonic() < deadline:
-        chunk = os.read(process.stderr.fileno(), 256)
-        if not chunk:
-            break
-        err += chunk
-    assert b"inference:" in err, err.decode()
+    process, err = _start(["infer", str(EXAMPLE), "--out", str(out), "--ensembles", "16", "--walkers", "64"],
+                          b"inference:")
     time.sleep(0.3)  # inside the sampling loop
     process.send_signal(signal.SIGINT)
     stdout, rest = process.communicate(timeout=60)
@@ -240,6 +229,39 @@ def test_ctrl_c_during_a_real_infer_run(tmp_path):
     lines = [line for line in err.replace("\r", "\n").splitlines() if line.strip()]
     assert lines[-1] == INTERRUPTED_MESSAGE
     assert [line for line in lines if not line.startswith("inference:")] == [INTERRUPTED_MESSAGE]
+    assert not out.exists() and stdout == b""
+
+
+def _start(argv, ready, **kwargs):
+    """Start ``bayespig argv`` in a new session and return it once stderr shows ``ready``."""
+    env = {**os.environ, "PYTHONPATH": str(Path(bayespig.__file__).parents[1])}
+    process = subprocess.Popen([sys.executable, "-c", "import sys; from bayespig.cli import main; "
+                                "sys.exit(main())", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               env=env, **kwargs)
+    err = b""
+    deadline = time.monotonic() + 120
+    while ready not in err and time.monotonic() < deadline:
+        chunk = os.read(process.stderr.fileno(), 256)
+        if not chunk:
+            break
+        err += chunk
+    assert ready in err, err.decode()
+    return process, err
+
+
+def test_ctrl_c_in_a_terminal_during_robustness(tmp_path):
+    """Ctrl-C in a terminal signals the whole process group, the pool's workers too: they leave it
+    to the parent (no worker traceback), which stops them and prints the one line."""
+    out = tmp_path / "cases.json"
+    process, err = _start(["robustness", "--method", "1,2,3,4", "--n-repeat", "1000", "--json", str(out)],
+                          b"robustness:", start_new_session=True)
+    time.sleep(0.5)
+    os.killpg(process.pid, signal.SIGINT)
+    stdout, rest = process.communicate(timeout=60)
+    err = (err + rest).decode()
+    assert process.returncode == 130, err
+    lines = [line for line in err.replace("\r", "\n").splitlines() if line.strip()]
+    assert [line for line in lines if not line.startswith("robustness:")] == [INTERRUPTED_MESSAGE]
     assert not out.exists() and stdout == b""
 
 

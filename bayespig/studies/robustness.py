@@ -487,6 +487,15 @@ def _local_pool():
     return ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1), initializer=_ignore_interrupts)
 
 
+def _stop_pool(pool, interrupted):
+    """Shut a local pool down; after Ctrl-C without waiting for the running cases (their
+    workers are terminated: nothing of theirs is kept)."""
+    if interrupted:
+        for process in list((getattr(pool, "_processes", None) or {}).values()):
+            process.terminate()
+    pool.shutdown(cancel_futures=True)
+
+
 @contextmanager
 def _executor_or_local(executor, n_cases):
     """The given executor, or a local pool of 2 processes when there are several cases."""
@@ -496,8 +505,11 @@ def _executor_or_local(executor, n_cases):
     pool = _local_pool()
     try:
         yield pool
-    finally:
-        pool.shutdown(cancel_futures=True)
+    except KeyboardInterrupt:
+        _stop_pool(pool, interrupted=True)
+        raise
+    else:
+        _stop_pool(pool, interrupted=False)
 
 
 def _progress_bar(total, progress):
@@ -1020,16 +1032,19 @@ def write_paper_tables(
     own = executor is None
     pool = _local_pool() if own else executor
     bar = _progress_bar(total, progress)
-    grids = {}
+    grids, interrupted = {}, False
     try:
         for name, (methods, a0, tau0, repeats, inst, settings) in studies.items():
             grids[name] = _grid(methods, a0, tau0, n_repeat=repeats, instrument=inst, executor=pool,
                                 fit_settings=settings, bar=bar, **common)
+    except KeyboardInterrupt:
+        interrupted = True
+        raise
     finally:
         if bar is not None:
             bar.close()
         if own:
-            pool.shutdown(cancel_futures=True)
+            _stop_pool(pool, interrupted)
     text = _report(grids, command=command, elapsed=time.perf_counter() - started, eps=eps)
     write_text_atomically(path, text)
     return grids
