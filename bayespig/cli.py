@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import sys
 import time
@@ -36,6 +37,8 @@ __all__ = ["INTERRUPTED_MESSAGE", "build_parser", "main"]
 INTERRUPTED_MESSAGE = "bayespig: interrupted; nothing written"
 #: Exit status after Ctrl-C (128 + SIGINT, the shell convention).
 EXIT_INTERRUPTED = 130
+#: Exit status when stdout is closed by its reader (128 + SIGPIPE, as the shell's own tools).
+EXIT_BROKEN_PIPE = 141
 #: Exit status of a user's mistake (bad argument, unreadable file), as argparse uses.
 EXIT_USAGE = 2
 
@@ -254,6 +257,9 @@ def main(argv=None):
         verbosity = getattr(args, "verbosity", 1)
         created = _check_paths(args)
         return args.func(args)
+    except BrokenPipeError:  # the reader of stdout went away (``bayespig ... | head``)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
     except KeyboardInterrupt:
         _remove_created(created)
         print(INTERRUPTED_MESSAGE, file=sys.stderr)

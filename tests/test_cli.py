@@ -450,3 +450,16 @@ def test_no_command_module_imports_the_cli():
             if isinstance(node, ast.ImportFrom):
                 module = ("." * node.level) + (node.module or "")
                 assert module not in ("..cli", "bayespig.cli"), path.name
+
+
+def test_a_closed_stdout_ends_quietly(tmp_path):
+    """``bayespig ... | head``: when the reader goes away the command stops with status 141
+    (128 + SIGPIPE) and no ``[Errno 32] Broken pipe`` message."""
+    env = {**os.environ, "PYTHONPATH": str(Path(bayespig.__file__).parents[1]), "BAYESPIG_CACHE": str(tmp_path)}
+    process = subprocess.Popen([sys.executable, "-c", "import sys; from bayespig.cli import main; "
+                                "sys.exit(main())", "check", str(EXAMPLE.parent / "wide-table-percent.txt")],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    process.stdout.close()  # the reader is gone before anything is printed
+    with process:
+        err = process.stderr.read().decode()
+    assert process.returncode == 141 and err == ""

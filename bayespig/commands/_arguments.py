@@ -144,7 +144,7 @@ def add_verbosity_arguments(parser):
     """``--quiet`` / ``--verbose`` (``--no-progress`` is a hidden alias of ``--quiet``).
 
     Sets ``args.verbosity`` to 0 (quiet: no progress output), 1 (default) or 2 (verbose: also
-    library warnings, and the traceback of an error).
+    the traceback of an error).
     """
     group = parser.add_mutually_exclusive_group()
     group.add_argument("-q", "--quiet", dest="verbosity", action="store_const", const=0,
@@ -152,7 +152,7 @@ def add_verbosity_arguments(parser):
     group.add_argument("--no-progress", dest="verbosity", action="store_const", const=0,
                        help=argparse.SUPPRESS)
     group.add_argument("-v", "--verbose", dest="verbosity", action="store_const", const=2,
-                       help="also every library warning, and the traceback of an error")
+                       help="on an error, also print its traceback (for a bug report)")
     parser.set_defaults(verbosity=1)
 
 
