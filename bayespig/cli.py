@@ -50,7 +50,7 @@ def _table_build(args):
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        table = load_table(instrument, g=args.g, n=args.n, rebuild=args.rebuild, progress=args.verbosity >= 1)
+        table = load_table(instrument, g=args.g, n=args.n, rebuild=args.rebuild, progress=not args.no_progress)
     for warning in caught:
         print(f"bayespig: warning: {warning.message}", file=sys.stderr)
     path = table_path(table.key)
@@ -251,10 +251,10 @@ def main(argv=None):
     checked before any work, every file is written atomically at the end, and folders the
     run created are removed.
     """
-    created, verbosity = [], 1
+    created, verbose = [], False
     try:
         args = build_parser().parse_args(argv)
-        verbosity = getattr(args, "verbosity", 1)
+        verbose = getattr(args, "verbose", False)
         created = _check_paths(args)
         return args.func(args)
     except BrokenPipeError:  # the reader of stdout went away (``bayespig ... | head``)
@@ -266,7 +266,7 @@ def main(argv=None):
         return EXIT_INTERRUPTED
     except (ValueError, OSError) as error:
         _remove_created(created)
-        if verbosity >= 2:
+        if verbose:
             traceback.print_exc()
         print(f"bayespig: error: {error}", file=sys.stderr)
         return EXIT_USAGE

@@ -130,6 +130,8 @@ def run_demo(out_dir=DEFAULT_OUT_DIR, *, seed=0, progress=True, quick=False, exe
     say(f"bayespig demo: {SYNTHETIC_PIGMENT['name']}")
     say(f"  simulating method-4 films (black and white substrates), multi-angle-45, eps 0.05, seed {seed}")
     measurements = demo_measurements(seed=seed, wavelength_nm=wavelength_nm)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    measurements.to_csv(out_dir / "measurements.csv")
     timings["simulate"] = time.perf_counter() - start
     say(f"  inferring the posterior at {wavelength_nm.size} wavelengths"
         + (" (quick settings)" if quick else ""))
@@ -142,7 +144,6 @@ def run_demo(out_dir=DEFAULT_OUT_DIR, *, seed=0, progress=True, quick=False, exe
     start = time.perf_counter()
     result = write_report(idata, out_dir, measurements=measurements, progress=progress,
                           title="bayespig demo: " + SYNTHETIC_PIGMENT["name"] + (" [quick]" if quick else ""))
-    measurements.to_csv(out_dir / "measurements.csv")  # last: an interrupted demo writes nothing
     timings["report"] = time.perf_counter() - start
     result.summary["timings_s"] = timings
     say(f"  done: {result.files['html']} (inference {timings['infer']:.1f} s, report "

@@ -190,24 +190,24 @@ class Problem:
         Parameters
         ----------
         measurements : MeasurementSet
-        method : {"auto", "method1", "method2", "method3", "method4", "general"} or int
+        method : {"auto", "method1", "method2", "method3", "method4", "general"}
             ``"auto"`` picks the most robust of the paper's methods the samples
             support (4, 1, 2, 3), or ``"general"`` (every film) when none applies.
-            ``"general"`` uses every film of the set. ``4`` and ``"4"`` mean ``"method4"``
-            (see :func:`method_name`).
+            ``"general"`` uses every film of the set.
 
         Returns
         -------
         Problem
         """
-        method = method_name(method)
         if method == "auto":
             supported = measurements.supported_methods()
             method = next((m for m in METHODS if supported[m]), "general")
         if method == "general":
             subset = measurements
-        else:
+        elif method in METHODS:
             subset = measurements.for_method(method)
+        else:
+            raise ValueError(f"method must be 'auto', 'general' or one of {', '.join(METHODS)}; got {method!r}")
         films, groups = [], []
         for sample in subset.films:
             group = None if sample.opaque else sample.group

@@ -140,20 +140,21 @@ def add_input_argument(parser, *flags, **kwargs):
 
 
 # ---------------------------------------------------------------------------- how much is said
-def add_verbosity_arguments(parser):
-    """``--quiet`` / ``--verbose`` (``--no-progress`` is a hidden alias of ``--quiet``).
+def add_verbosity_arguments(parser, *, no_progress_alias=True):
+    """``-q/--quiet`` (``args.no_progress``) and ``-v/--verbose`` (``args.verbose``).
 
-    Sets ``args.verbosity`` to 0 (quiet: no progress output), 1 (default) or 2 (verbose: also
-    the traceback of an error).
+    ``--quiet``: no progress output (results, warnings and errors are still printed);
+    ``--verbose``: on an error, also its traceback. ``--no-progress``, the older spelling of
+    ``--quiet``, stays as a hidden alias (``no_progress_alias=False`` where the command
+    declares it itself).
     """
     group = parser.add_mutually_exclusive_group()
-    group.add_argument("-q", "--quiet", dest="verbosity", action="store_const", const=0,
+    group.add_argument("-q", "--quiet", dest="no_progress", action="store_true",
                        help="no progress output (results, warnings and errors are still printed)")
-    group.add_argument("--no-progress", dest="verbosity", action="store_const", const=0,
-                       help=argparse.SUPPRESS)
-    group.add_argument("-v", "--verbose", dest="verbosity", action="store_const", const=2,
+    if no_progress_alias:
+        group.add_argument("--no-progress", dest="no_progress", action="store_true", help=argparse.SUPPRESS)
+    group.add_argument("-v", "--verbose", action="store_true",
                        help="on an error, also print its traceback (for a bug report)")
-    parser.set_defaults(verbosity=1)
 
 
 # ----------------------------------------------------------------------- methods, instruments

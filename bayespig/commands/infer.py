@@ -9,16 +9,9 @@ import warnings
 import numpy as np
 
 from .._atomic import atomic_path
-from ._arguments import (
-    METHOD_HELP,
-    add_film_argument,
-    add_input_argument,
-    add_output_argument,
-    add_substrate_argument,
-    add_verbosity_arguments,
-    method_argument,
-    read_film,
-)
+from ._arguments import INFER_METHODS as _METHODS
+from ._arguments import add_film_argument, add_substrate_argument, read_film
+from ._arguments import METHOD_HELP, add_input_argument, add_output_argument, add_verbosity_arguments, method_argument
 
 __all__ = ["add_infer_parser", "run_infer"]
 
@@ -89,11 +82,11 @@ def run_infer(args):
                                                  ("max_steps", args.max_steps)) if value is not None}
     settings = InferenceSettings(**overrides)
     if not os.path.exists(args.measurements):
-        raise ValueError(f"{args.measurements}: file not found")
+        raise ValueError(f"{args.measurements}: no such file")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ConvergenceWarning)
-        idata = infer(read_film(args.measurements, args.film), method=args.method, seed=args.seed,
-                      g=args.g, eps=eps, progress=args.verbosity >= 1, settings=settings,
+        idata = infer(read_film(args.measurements, args.film), method=_METHODS[args.method], seed=args.seed,
+                      g=args.g, eps=eps, progress=not args.no_progress, settings=settings,
                       substrate_sd=args.substrate_sd)
         flagged = diagnose(idata, warn=False)
     for warning in caught:

@@ -6,16 +6,9 @@ import os
 import sys
 import warnings
 
-from ._arguments import (
-    METHOD_HELP,
-    add_film_argument,
-    add_input_argument,
-    add_output_argument,
-    add_substrate_argument,
-    add_verbosity_arguments,
-    method_argument,
-    read_film,
-)
+from ._arguments import INFER_METHODS as _METHODS
+from ._arguments import add_film_argument, add_substrate_argument, read_film
+from ._arguments import METHOD_HELP, add_input_argument, add_output_argument, add_verbosity_arguments, method_argument
 
 __all__ = ["add_demo_parser", "add_report_parser", "run_demo", "run_report"]
 
@@ -51,7 +44,8 @@ def add_report_parser(subparsers):
     parser.add_argument("--illuminant", default=DEFAULT_ILLUMINANT,
                         help=f"colour-science illuminant name (default {DEFAULT_ILLUMINANT!r})")
     parser.add_argument("--title", default=None, help="report title")
-    add_verbosity_arguments(parser)
+    parser.add_argument("--no-progress", action="store_true", help="no progress output")
+    add_verbosity_arguments(parser, no_progress_alias=False)
     parser.set_defaults(func=run_report)
     return parser
 
@@ -70,14 +64,14 @@ def run_report(args):
 
     if not os.path.exists(args.source):
         raise ValueError(f"{args.source}: no such file")
-    infer_kwargs = {"method": args.method, "seed": args.seed, "g": args.g,
+    infer_kwargs = {"method": _METHODS[args.method], "seed": args.seed, "g": args.g,
                     "substrate_sd": args.substrate_sd}
     source = read_film(args.source, args.film)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = write_report(source, args.out, measurements=args.measurements,
                               observer=args.observer, illuminant=args.illuminant, title=args.title,
-                              infer_kwargs=infer_kwargs, progress=args.verbosity >= 1)
+                              infer_kwargs=infer_kwargs, progress=not args.no_progress)
     _print_warnings(caught)
     _print_result(result)
     return 0
@@ -115,8 +109,9 @@ def add_demo_parser(subparsers):
                         help=f"output folder (default {DEFAULT_OUT_DIR})")
     parser.add_argument("--seed", type=int, default=0, help="seed of the noise and the sampler (default 0)")
     parser.add_argument("--quick", action="store_true",
-                        help="shorter runs at every third wavelength (for tests)")
-    add_verbosity_arguments(parser)
+                        help="shorter runs at every second wavelength (for tests)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress output")
+    add_verbosity_arguments(parser, no_progress_alias=False)
     parser.set_defaults(func=run_demo)
     return parser
 
@@ -129,7 +124,7 @@ def run_demo(args):
         raise ValueError(f"--seed must be a non-negative integer, got {args.seed}")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = demo(args.out, seed=args.seed, progress=args.verbosity >= 1, quick=args.quick)
+        result = demo(args.out, seed=args.seed, progress=not args.no_progress, quick=args.quick)
     _print_warnings(caught)
     _print_result(result)
     return 0

@@ -104,7 +104,7 @@ def run_revigo(args):
     if args.draws < 10:
         raise ValueError(f"--draws must be >= 10, got {args.draws}")
     path = revigo_folder(args.path)
-    progress = None if args.verbosity < 1 else (lambda message: print(message, file=sys.stderr, flush=True))
+    progress = None if args.no_progress else (lambda message: print(message, file=sys.stderr, flush=True))
     study = revigo_study(path, specular=args.specular, progress=progress, posterior=args.posterior,
                          posterior_eps=eps, n_draws=args.draws, seed=args.seed,
                          g_sensitivity=G_SENSITIVITY if args.g_sensitivity is None else tuple(args.g_sensitivity),

@@ -78,7 +78,7 @@ def run_robustness(args):
     from ..studies import robustness
 
     instrument = instrument_argument(args.instrument)
-    progress = args.verbosity >= 1
+    progress = not args.no_progress
     if args.n_repeat is not None and args.n_repeat < 2:
         raise ValueError(f"--n-repeat must be at least 2, got {args.n_repeat}")
     if not (np.isfinite(args.eps) and args.eps >= 0):

@@ -5,8 +5,7 @@ import numpy as np
 import pytest
 
 from bayespig.commands._arguments import check_output_path, parse_methods
-from bayespig.data import simulate
-from bayespig.likelihood import Problem, method_name
+from bayespig.likelihood import method_name
 
 VALID = "1, 2, 3, 4, method1, method2, method3, method4"
 
@@ -35,12 +34,6 @@ def test_an_unknown_method_lists_the_valid_ones(bad):
 def test_a_method_of_the_wrong_type_is_a_type_error_naming_the_argument(bad):
     with pytest.raises(TypeError, match=r"^design must be a method number or name \(1, 2, 3, 4, "):
         method_name(bad, argument="design")
-
-
-def test_problem_from_measurements_takes_the_number():
-    measurements = simulate(a=0.1, tau=1.0, design="method4", wavelengths=[500.0], seed=0)
-    assert Problem.from_measurements(measurements, 4).method == "method4"
-    assert Problem.from_measurements(measurements, "4").method == "method4"
 
 
 def test_parse_methods_takes_both_spellings():
