@@ -12,7 +12,9 @@ import argparse
 import json
 import os
 import shutil
+import signal
 import sys
+import threading
 import time
 import traceback
 import warnings
@@ -217,6 +219,52 @@ def build_parser():
     return parser
 
 
+def _inside_emcee_likelihood(frame):
+    """True when ``frame`` runs inside emcee's wrapper of the log-probability function."""
+    wrapper = getattr(sys.modules.get("emcee.ensemble"), "_FunctionWrapper", None)
+    code = getattr(getattr(wrapper, "__call__", None), "__code__", None)
+    while code is not None and frame is not None:
+        if frame.f_code is code:
+            return True
+        frame = frame.f_back
+    return False
+
+
+class _InterruptOutsideEmcee:
+    """Ctrl-C raises KeyboardInterrupt, but never inside emcee's log-probability wrapper.
+
+    emcee's ``_FunctionWrapper`` prints "emcee: Exception while calling your likelihood
+    function", the walkers' positions and a traceback for any exception raised in the
+    likelihood, Ctrl-C included. When the interrupt lands there it is retried every
+    :attr:`RETRY_S` seconds (SIGALRM) until the wrapper has returned, a few milliseconds later.
+    A no-op outside the main thread, where signals cannot be handled, and without SIGALRM.
+    """
+
+    #: Retry interval of a deferred interrupt [s].
+    RETRY_S = 0.005
+
+    def __enter__(self):
+        self._saved = None
+        if (threading.current_thread() is threading.main_thread() and hasattr(signal, "setitimer")
+                and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
+            self._saved = (signal.signal(signal.SIGINT, self._handler),
+                           signal.signal(signal.SIGALRM, self._handler))
+        return self
+
+    def __exit__(self, *exc):
+        if self._saved is not None:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.signal(signal.SIGINT, self._saved[0])
+            signal.signal(signal.SIGALRM, self._saved[1])
+        return False
+
+    def _handler(self, signum, frame):
+        if _inside_emcee_likelihood(frame):
+            signal.setitimer(signal.ITIMER_REAL, self.RETRY_S)
+            return
+        raise KeyboardInterrupt
+
+
 def _check_paths(args):
     """Check every input and output path of the command before it runs.
 
@@ -256,7 +304,8 @@ def main(argv=None):
         args = build_parser().parse_args(argv)
         verbose = getattr(args, "verbose", False)
         created = _check_paths(args)
-        return args.func(args)
+        with _InterruptOutsideEmcee():
+            return args.func(args)
     except BrokenPipeError:  # the reader of stdout went away (``bayespig ... | head``)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_BROKEN_PIPE

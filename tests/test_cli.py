@@ -214,6 +214,32 @@ def test_ctrl_c_into_an_existing_folder_keeps_the_folder_and_what_was_there(tmp_
     assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
 
 
+def test_ctrl_c_inside_the_likelihood_prints_no_emcee_traceback(tmp_path, monkeypatch, capsys):
+    """emcee prints the walkers and a traceback for any exception in the log-probability, Ctrl-C
+    included: an interrupt landing there is raised once the likelihood has returned."""
+    import emcee
+
+    calls = []
+
+    def log_prob(x):
+        calls.append(1)
+        if len(calls) == 3:
+            os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C while inside emcee's wrapper
+            time.sleep(0.05)
+        return -0.5 * float(x @ x)
+
+    def sampling_infer(*args, **kwargs):
+        start = np.random.default_rng(0).normal(size=(4, 1))
+        emcee.EnsembleSampler(4, 1, log_prob).run_mcmc(start, 1000)
+
+    monkeypatch.setattr("bayespig.inference.infer", sampling_infer)
+    assert main(["infer", str(EXAMPLE), "--out", str(tmp_path / "o")]) == 130
+    captured = capsys.readouterr()
+    assert captured.err == INTERRUPTED and captured.out == ""
+    assert 3 < len(calls) < 1000 * 4  # interrupted right after the call that was interrupted
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_ctrl_c_during_a_real_infer_run(tmp_path):
     """SIGINT to ``bayespig infer`` on the bundled example once the sampler runs: exit 130, the
     one line on stderr (besides the progress bar), no traceback, no output folder."""
