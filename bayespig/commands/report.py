@@ -7,8 +7,8 @@ import sys
 import warnings
 
 from ._arguments import INFER_METHODS as _METHODS
-from ._arguments import add_film_argument, add_substrate_argument, read_film
 from ._arguments import METHOD_HELP, add_input_argument, add_output_argument, add_verbosity_arguments, method_argument
+from ._arguments import add_film_argument, add_substrate_argument, read_film
 
 __all__ = ["add_demo_parser", "add_report_parser", "run_demo", "run_report"]
 
