@@ -253,7 +253,8 @@ def read_film(path, film, flag="--film"):
     from ..data import read_measurements
     from ..data.io import file_format
 
-    kind = file_format(path)
+    # only a regular file is sniffed here: a pipe (<(cat f), /dev/stdin) can be read only once
+    kind = file_format(path) if os.path.isfile(path) else "spectral_table"
     if kind != "spectral_table":
         name = {"csv": "a bayespig CSV", "astm_e1392": "an ASTM E1392 file"}[kind]
         raise ValueError(f"{flag} selects a film of a Revigo/wide spectral table; '{path}' is {name} "
