@@ -109,7 +109,7 @@ def posterior_robustness(methods=PAPER_METHODS, a0_values=PAPER_A0, tau0_values=
         for j, (a0, tau0) in enumerate(pairs):
             row = summary.iloc[j]
             draws = tau_post.values[..., j].ravel()
-            frequentist = grid[method, a0, tau0] if len(methods) * len(pairs) > 1 else grid
+            frequentist = grid[method, a0, tau0]
             r_hat = max(row["a_r_hat"], row["tau_r_hat"])
             ess = min(row[f"{p}_ess_{kind}"] for p in ("a", "tau") for kind in ("bulk", "tail"))
             records.append({

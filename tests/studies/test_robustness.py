@@ -253,6 +253,21 @@ def test_progress_bar_counts_the_refits(capsys):
     assert capsys.readouterr().err == ""
 
 
+def test_posterior_robustness_shows_its_progress_and_takes_a_method_number(tmp_path, capsys):
+    """``bayespig robustness --posterior`` ran 51 s without a word (issue 18)."""
+    from bayespig.inference import InferenceSettings
+    from bayespig.studies.posterior_robustness import write_posterior_tables
+
+    records = write_posterior_tables(tmp_path / "p.md", methods=(4,), a0_values=(0.1,), tau0_values=(1.0,),
+                                     n_repeat=4, settings=InferenceSettings(draws_per_chain=256, target_ess=100),
+                                     progress=True)
+    assert [r["method"] for r in records] == ["method4"]
+    err = capsys.readouterr().err
+    assert "robustness: 100%" in err and "4/4" in err  # the refits
+    assert "posterior robustness: method4, 1 case\n" in err and "inference: 100%" in err
+    assert "## method4" in (tmp_path / "p.md").read_text(encoding="utf-8")
+
+
 def test_bad_arguments_raise_value_errors():
     for kwargs, match in (
         ({"method": "method5"}, "unknown method .method5.: method must be one of 1, 2, 3, 4, method1, method2, method3, method4$"),
