@@ -489,3 +489,13 @@ def test_a_closed_stdout_ends_quietly(tmp_path):
     with process:
         err = process.stderr.read().decode()
     assert process.returncode == 141 and err == ""
+
+
+def test_verbose_adds_the_traceback_of_an_error(tmp_path, capsys):
+    missing = tmp_path / "nothing.csv"
+    assert main(["check", str(missing)]) == 2
+    assert capsys.readouterr().err == f"bayespig: error: {missing}: file not found\n"
+    assert main(["check", str(missing), "--verbose"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("Traceback (most recent call last):\n")
+    assert err.endswith(f"ValueError: {missing}: file not found\nbayespig: error: {missing}: file not found\n")
