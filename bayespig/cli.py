@@ -222,7 +222,7 @@ def build_parser():
 def _inside_emcee_likelihood(frame):
     """True when ``frame`` runs inside emcee's wrapper of the log-probability function."""
     wrapper = getattr(sys.modules.get("emcee.ensemble"), "_FunctionWrapper", None)
-    code = getattr(getattr(wrapper, "__call__", None), "__code__", None)
+    code = None if wrapper is None else getattr(wrapper.__call__, "__code__", None)
     while code is not None and frame is not None:
         if frame.f_code is code:
             return True

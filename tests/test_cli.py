@@ -119,6 +119,8 @@ def test_infer_one_film_of_a_spectral_table_and_warn_where_the_model_cannot_fit(
 # --- a new user's mistakes and interruptions (issue 18) ----------------------------------------
 EXAMPLE = Path(__file__).parents[1] / "examples" / "data" / "method4-black-white.csv"
 INTERRUPTED = INTERRUPTED_MESSAGE + "\n"
+#: ``python -c CLI_MAIN ARGS`` runs ``bayespig ARGS`` (the console script may not be on PATH).
+CLI_MAIN = "import sys; from bayespig.cli import main; sys.exit(main())"
 #: Every command that writes something, its output option and what it writes there, and the
 #: function doing the work (monkeypatched: it must not be reached when the output is wrong).
 WRITING_COMMANDS = [
@@ -261,9 +263,8 @@ def test_ctrl_c_during_a_real_infer_run(tmp_path):
 def _start(argv, ready, **kwargs):
     """Start ``bayespig argv`` in a new session and return it once stderr shows ``ready``."""
     env = {**os.environ, "PYTHONPATH": str(Path(bayespig.__file__).parents[1])}
-    process = subprocess.Popen([sys.executable, "-c", "import sys; from bayespig.cli import main; "
-                                "sys.exit(main())", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                               env=env, **kwargs)
+    process = subprocess.Popen([sys.executable, "-c", CLI_MAIN, *argv], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, env=env, **kwargs)
     err = b""
     deadline = time.monotonic() + 120
     while ready not in err and time.monotonic() < deadline:
@@ -482,8 +483,7 @@ def test_a_closed_stdout_ends_quietly(tmp_path):
     """``bayespig ... | head``: when the reader goes away the command stops with status 141
     (128 + SIGPIPE) and no ``[Errno 32] Broken pipe`` message."""
     env = {**os.environ, "PYTHONPATH": str(Path(bayespig.__file__).parents[1]), "BAYESPIG_CACHE": str(tmp_path)}
-    process = subprocess.Popen([sys.executable, "-c", "import sys; from bayespig.cli import main; "
-                                "sys.exit(main())", "check", str(EXAMPLE.parent / "wide-table-percent.txt")],
+    process = subprocess.Popen([sys.executable, "-c", CLI_MAIN, "check", str(EXAMPLE.parent / "wide-table-percent.txt")],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
     process.stdout.close()  # the reader is gone before anything is printed
     with process:

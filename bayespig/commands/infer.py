@@ -10,8 +10,16 @@ import numpy as np
 
 from .._atomic import atomic_path
 from ._arguments import INFER_METHODS as _METHODS
-from ._arguments import add_film_argument, add_substrate_argument, read_film
-from ._arguments import METHOD_HELP, add_input_argument, add_output_argument, add_verbosity_arguments, method_argument
+from ._arguments import (
+    METHOD_HELP,
+    add_film_argument,
+    add_input_argument,
+    add_output_argument,
+    add_substrate_argument,
+    add_verbosity_arguments,
+    method_argument,
+    read_film,
+)
 
 __all__ = ["add_infer_parser", "run_infer"]
 
