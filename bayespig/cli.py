@@ -1,43 +1,58 @@
-"""The ``bayespig`` command: a thin shell over the Python API."""
+"""bayespig: the optical properties of a pigment (absorption a and optical thickness tau per
+wavelength, with their uncertainty) from measurements of paint films, and the studies of the
+paper's methods.
+
+Each command reads measurement files (bayespig CSV, ASTM E1392 or a wide spectral table) or
+simulates them, and writes its outputs only when it has finished (Ctrl-C writes nothing).
+"""
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import shutil
+import signal
 import sys
+import threading
 import time
+import traceback
 import warnings
 
 import numpy as np
 
-__all__ = ["main"]
+from . import __version__
+from .commands._arguments import (
+    add_input_argument,
+    add_output_argument,
+    add_verbosity_arguments,
+    check_input_path,
+    check_output_path,
+    instrument_argument,
+    instrument_help,
+    paper_method_argument,
+)
 
+__all__ = ["INTERRUPTED_MESSAGE", "build_parser", "main"]
 
-def _instrument_argument(name):
-    """A built-in instrument name, or comma-separated geometry labels such as ``45as15,45as110``."""
-    from .instruments import BUILT_IN_INSTRUMENTS
-
-    if name in BUILT_IN_INSTRUMENTS:
-        return name
-    try:
-        from .instruments import get_instrument
-
-        return get_instrument([label for label in name.split(",") if label.strip()])
-    except ValueError:
-        raise ValueError(
-            f"unknown instrument {name!r}; built-in instruments: {', '.join(BUILT_IN_INSTRUMENTS)} "
-            "(or comma-separated geometry labels such as 45as15,45as110)"
-        ) from None
+#: The one line printed when the user interrupts a command (Ctrl-C); the exit status is 130.
+INTERRUPTED_MESSAGE = "bayespig: interrupted; nothing written"
+#: Exit status after Ctrl-C (128 + SIGINT, the shell convention).
+EXIT_INTERRUPTED = 130
+#: Exit status when stdout is closed by its reader (128 + SIGPIPE, as the shell's own tools).
+EXIT_BROKEN_PIPE = 141
+#: Exit status of a user's mistake (bad argument, unreadable file), as argparse uses.
+EXIT_USAGE = 2
 
 
 def _table_build(args):
     from .table import load_table, table_path
 
-    instrument = _instrument_argument(args.instrument)
+    instrument = instrument_argument(args.instrument)
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        table = load_table(instrument, g=args.g, n=args.n, rebuild=args.rebuild, progress=True)
+        table = load_table(instrument, g=args.g, n=args.n, rebuild=args.rebuild, progress=not args.no_progress)
     for warning in caught:
         print(f"bayespig: warning: {warning.message}", file=sys.stderr)
     path = table_path(table.key)
@@ -72,6 +87,16 @@ def _format_settings(settings):
             f"start thickness {s['start_thickness']:.3g}")
 
 
+def _instrument_label(channel_labels):
+    """A table's instrument as ``--instrument`` names it: the built-in name, else its geometry labels."""
+    from .instruments import BUILT_IN_INSTRUMENTS, get_instrument
+
+    for name in BUILT_IN_INSTRUMENTS:
+        if [ch.label for ch in get_instrument(name).channels] == list(channel_labels):
+            return name
+    return ",".join(channel_labels)
+
+
 def _table_info(args):
     from .table import cache_directory
 
@@ -81,15 +106,15 @@ def _table_info(args):
     shown = 0
     for path in files:
         info = _describe_cache_file(path)
-        name = info.get("name")
+        instrument = info.get("instrument")
+        name = None if instrument is None else _instrument_label([ch["label"] for ch in instrument["channels"]])
         if args.instrument and name != args.instrument:
             continue
         shown += 1
         size = f"{path.stat().st_size / 1e6:.2f} MB"
-        if "instrument" not in info:
+        if instrument is None:
             print(f"{path.name}  {size}  {info['status']}")
             continue
-        instrument = info["instrument"]
         labels = ", ".join(ch["label"] for ch in instrument["channels"])
         print(f"{info['key']}  {size}  {name}  n = {instrument['n']:g}  "
               f"[channels: {labels}]  bayespig {info['version']}")
@@ -110,7 +135,7 @@ def _check(args):
 def _simulate(args):
     from .data import simulate_to_csv
 
-    instrument = _instrument_argument(args.instrument)
+    instrument = instrument_argument(args.instrument)
     measurements = simulate_to_csv(args.out, a=args.a, tau=args.tau, g=args.g, design=args.design,
                                    instrument=instrument, eps=args.eps, seed=args.seed)
     print(f"wrote {args.out}: {len(measurements.samples)} samples, "
@@ -120,43 +145,71 @@ def _simulate(args):
 
 def build_parser():
     """The argument parser of the ``bayespig`` command."""
-    parser = argparse.ArgumentParser(prog="bayespig", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
     from .commands import compare, design, infer, report, revigo, robustness
+    from .instruments import BUILT_IN_INSTRUMENTS
+
+    parser = argparse.ArgumentParser(prog="bayespig", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("-V", "--version", action="version", version=f"bayespig {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     report.add_demo_parser(sub)
     infer.add_infer_parser(sub)
     report.add_report_parser(sub)
 
-    table = sub.add_parser("table", help="build and inspect the cached look-up tables")
-    table_sub = table.add_subparsers(dest="table_command", required=True)
-    build = table_sub.add_parser("build", help="build (or load) the cached table of an instrument")
-    build.add_argument("--instrument", required=True,
-                       help="built-in name (multi-angle-45, multi-angle-45-15, 8d-sci, 8d-sce, "
-                            "45-0) or comma-separated geometry labels such as 45as15,45as110")
+    table = sub.add_parser("table", help="build and inspect the cached look-up tables",
+                           description="The look-up tables of the radiative-transfer model, one per "
+                           "instrument, g axis and binder index, cached on disk ($BAYESPIG_CACHE).")
+    table_sub = table.add_subparsers(dest="table_command", required=True, metavar="ACTION")
+    build = table_sub.add_parser("build", help="build (or load) the cached table of an instrument",
+                                 description="Build the look-up table of an instrument (minutes the first "
+                                 "time) or load it from the cache, and say where it is.")
+    build.add_argument("--instrument", required=True, help=instrument_help())
     build.add_argument("--g", choices=("isotropic", "free"), default="isotropic",
                        help="isotropic scattering only (default) or a g axis")
     build.add_argument("--n", type=float, default=1.45,
                        help="binder refractive index (default 1.45)")
     build.add_argument("--rebuild", action="store_true", help="ignore any cached file")
+    add_verbosity_arguments(build)
     build.set_defaults(func=_table_build)
-    info = table_sub.add_parser("info", help="list the cached tables")
-    info.add_argument("--instrument", help="only tables of this instrument (name as listed)")
+    info = table_sub.add_parser("info", help="list the cached tables",
+                                description="List the cached look-up tables: instrument, channels, "
+                                "settings and size.")
+    info.add_argument("--instrument", default=None,
+                      help="only the tables of this instrument, named as listed: a built-in name ("
+                      + ", ".join(BUILT_IN_INSTRUMENTS) + ") or comma-separated geometry labels")
+    add_verbosity_arguments(info)
     info.set_defaults(func=_table_info)
 
-    check = sub.add_parser("check", help="say what a measurement file holds, or every problem in it")
-    check.add_argument("file", help="bayespig CSV, ASTM E1392 file or wide spectral table")
+    check = sub.add_parser("check", help="say what a measurement file holds, or every problem in it",
+                           description="Read a measurement file and say what it holds (samples, "
+                           "wavelengths, which of the paper's methods it supports), or list every "
+                           "problem in it with its row and field. Exit status 2 when it cannot be used.")
+    add_input_argument(check, "file", help="bayespig CSV, ASTM E1392 file or wide spectral table")
+    add_verbosity_arguments(check)
     check.set_defaults(func=_check)
 
-    simulate = sub.add_parser("simulate", help="simulate a measurement set (paper eq. 7 noise) as CSV")
-    simulate.add_argument("--a", type=float, required=True, help="relative absorption a = 1 - omega")
-    simulate.add_argument("--tau", type=float, required=True, help="optical thickness of the film group")
-    simulate.add_argument("--g", type=float, default=0.0, help="phase-function parameter (default 0)")
-    simulate.add_argument("--design", default="method4", choices=("method1", "method2", "method3", "method4"))
-    simulate.add_argument("--instrument", default="multi-angle-45")
-    simulate.add_argument("--eps", type=float, default=0.05, help="relative measurement error (default 0.05)")
-    simulate.add_argument("--seed", type=int, default=0)
-    simulate.add_argument("--out", required=True, help="CSV file to write")
+    simulate = sub.add_parser("simulate", help="simulate a measurement set (paper eq. 7 noise) as CSV",
+                              description="Simulate the films of one of the paper's designs for a "
+                              "pigment (a, tau, g), with the multiplicative noise of eq. (7), and "
+                              "write them as a bayespig CSV file (the truth in its metadata).")
+    simulate.add_argument("--a", type=float, required=True,
+                          help="relative absorption a = 1 - omega of the pigment [-]")
+    simulate.add_argument("--tau", type=float, required=True,
+                          help="optical thickness of the thin film(s) [-]")
+    simulate.add_argument("--g", type=float, default=0.0,
+                          help="Henyey-Greenstein phase-function parameter (default 0)")
+    simulate.add_argument("--design", default="method4", type=paper_method_argument,
+                          metavar="{1,2,3,4,method1,...,method4}",
+                          help="the films of the paper's method (default method4: one film on black "
+                          "and on white)")
+    simulate.add_argument("--instrument", default="multi-angle-45",
+                          help=instrument_help(default="multi-angle-45"))
+    simulate.add_argument("--eps", type=float, default=0.05,
+                          help="relative measurement error of eq. (7) (default 0.05)")
+    simulate.add_argument("--seed", type=int, default=0, help="seed of the noise (default 0)")
+    add_output_argument(simulate, "--out", kind="file", required=True, help="CSV file to write")
+    add_verbosity_arguments(simulate)
     simulate.set_defaults(func=_simulate)
 
     robustness.add_robustness_parser(sub)
@@ -166,15 +219,106 @@ def build_parser():
     return parser
 
 
+def _inside_emcee_likelihood(frame):
+    """True when ``frame`` runs inside emcee's wrapper of the log-probability function."""
+    wrapper = getattr(sys.modules.get("emcee.ensemble"), "_FunctionWrapper", None)
+    code = None if wrapper is None else getattr(wrapper.__call__, "__code__", None)
+    while code is not None and frame is not None:
+        if frame.f_code is code:
+            return True
+        frame = frame.f_back
+    return False
+
+
+class _InterruptOutsideEmcee:
+    """Ctrl-C raises KeyboardInterrupt, but never inside emcee's log-probability wrapper.
+
+    emcee's ``_FunctionWrapper`` prints "emcee: Exception while calling your likelihood
+    function", the walkers' positions and a traceback for any exception raised in the
+    likelihood, Ctrl-C included. When the interrupt lands there it is retried every
+    :attr:`RETRY_S` seconds (SIGALRM) until the wrapper has returned, a few milliseconds later.
+    A no-op outside the main thread, where signals cannot be handled, and without SIGALRM.
+    """
+
+    #: Retry interval of a deferred interrupt [s].
+    RETRY_S = 0.005
+
+    def __enter__(self):
+        self._saved = None
+        if (threading.current_thread() is threading.main_thread() and hasattr(signal, "setitimer")
+                and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
+            self._saved = (signal.signal(signal.SIGINT, self._handler),
+                           signal.signal(signal.SIGALRM, self._handler))
+        return self
+
+    def __exit__(self, *exc):
+        if self._saved is not None:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.signal(signal.SIGINT, self._saved[0])
+            signal.signal(signal.SIGALRM, self._saved[1])
+        return False
+
+    def _handler(self, signum, frame):
+        if _inside_emcee_likelihood(frame):
+            signal.setitimer(signal.ITIMER_REAL, self.RETRY_S)
+            return
+        raise KeyboardInterrupt
+
+
+def _check_paths(args):
+    """Check every input and output path of the command before it runs.
+
+    Returns
+    -------
+    list of pathlib.Path
+        Folders the outputs will create (removed again when the command does not finish).
+    """
+    for dest in getattr(args, "input_paths", ()):
+        if getattr(args, dest) is not None:
+            check_input_path(getattr(args, dest))
+    created = []
+    for dest, kind in (getattr(args, "output_paths", None) or {}).items():
+        if getattr(args, dest) is not None:
+            missing = check_output_path(getattr(args, dest), kind)
+            if missing is not None:
+                created.append(missing)
+    return created
+
+
+def _remove_created(created):
+    """Remove the folders this run created for its outputs (it did not finish)."""
+    for folder in created:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 def main(argv=None):
-    """Entry point of the ``bayespig`` command; returns the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    """Entry point of the ``bayespig`` command; returns the exit status.
+
+    A user's mistake prints one ``bayespig: error: ...`` line (exit 2); Ctrl-C prints
+    :data:`INTERRUPTED_MESSAGE` (exit 130). Either way no output is left behind: the paths are
+    checked before any work, every file is written atomically at the end, and folders the
+    run created are removed.
+    """
+    created, verbose = [], False
     try:
-        return args.func(args)
+        args = build_parser().parse_args(argv)
+        verbose = getattr(args, "verbose", False)
+        created = _check_paths(args)
+        with _InterruptOutsideEmcee():
+            return args.func(args)
+    except BrokenPipeError:  # the reader of stdout went away (``bayespig ... | head``)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
+    except KeyboardInterrupt:
+        _remove_created(created)
+        print(INTERRUPTED_MESSAGE, file=sys.stderr)
+        return EXIT_INTERRUPTED
     except (ValueError, OSError) as error:
+        _remove_created(created)
+        if verbose:
+            traceback.print_exc()
         print(f"bayespig: error: {error}", file=sys.stderr)
-        return 2
+        return EXIT_USAGE
 
 
 if __name__ == "__main__":  # pragma: no cover

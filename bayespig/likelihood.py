@@ -32,13 +32,57 @@ __all__ = [
     "Priors",
     "Problem",
     "WavelengthModel",
+    "method_name",
     "multiplicative_normal_logpdf",
 ]
 
 #: The paper's methods, in the order ``method="auto"`` prefers them (paper section 4.2:
 #: method 4 is the most robust, then method 1).
 METHODS = ("method4", "method1", "method2", "method3")
+#: What a method may be called wherever one is asked for: the paper's number or its name.
+PAPER_METHOD_SPELLINGS = {**{str(k): f"method{k}" for k in range(1, 5)},
+                          **{f"method{k}": f"method{k}" for k in range(1, 5)}}
 _LOG_2PI = np.log(2.0 * np.pi)
+
+
+def method_name(method, *, also=("auto", "general"), argument="method"):
+    """The canonical name of a method, whichever way it is spelled.
+
+    ``4``, ``"4"`` and ``"method4"`` all mean the paper's method 4 (section 3); every entry
+    point (the Python API and the command line) goes through this function.
+
+    Parameters
+    ----------
+    method : int or str
+        1..4, ``"1"``..``"4"``, ``"method1"``..``"method4"``, or one of ``also``.
+    also : tuple of str
+        Names accepted besides the paper's methods (default ``"auto"`` and ``"general"``;
+        ``()`` where only the paper's methods make sense).
+    argument : str
+        Name of the argument, for the error message.
+
+    Returns
+    -------
+    str
+        ``"method1"`` .. ``"method4"`` or the member of ``also``.
+
+    Raises
+    ------
+    TypeError
+        When ``method`` is neither an integer nor a string (``True`` is not a method).
+    ValueError
+        For an unknown method, listing the valid ones.
+    """
+    valid = ", ".join([*PAPER_METHOD_SPELLINGS, *also])
+    if isinstance(method, (bool, np.bool_)) or not isinstance(method, (int, np.integer, str)):
+        raise TypeError(f"{argument} must be a method number or name ({valid}), "
+                        f"got {type(method).__name__} {method!r}")
+    key = str(int(method)) if isinstance(method, (int, np.integer)) else method.strip()
+    if key in also:
+        return key
+    if key not in PAPER_METHOD_SPELLINGS:
+        raise ValueError(f"unknown method {method!r}: {argument} must be one of {valid}")
+    return PAPER_METHOD_SPELLINGS[key]
 
 
 def multiplicative_normal_logpdf(observed, model, eps):

@@ -1,16 +1,208 @@
-"""Command-line values shared by the sub-commands: number lists, method names, the film of a table."""
+"""Command-line values shared by the sub-commands: paths checked before any work, number lists,
+method and instrument names, the film of a table, how much is printed."""
 
 from __future__ import annotations
 
+import argparse
+import os
+import tempfile
+from pathlib import Path
+
 import numpy as np
 
-__all__ = ["INFER_METHODS", "METHOD_NAMES", "add_film_argument", "add_substrate_argument", "parse_methods",
-           "parse_numbers", "read_film"]
+from ..instruments import BUILT_IN_INSTRUMENTS, get_instrument
+from ..likelihood import method_name
 
-#: ``--method 1,4`` -> the paper's method names.
-METHOD_NAMES = {"1": "method1", "2": "method2", "3": "method3", "4": "method4"}
-#: ``--method`` of ``infer`` and ``report``: a method, ``auto`` or ``general``.
-INFER_METHODS = {**METHOD_NAMES, "auto": "auto", "general": "general"}
+__all__ = ["INFER_METHODS", "INPUT_KINDS", "METHOD_HELP", "add_film_argument", "add_input_argument", "add_output_argument",
+           "add_substrate_argument", "add_verbosity_arguments", "check_input_path", "check_output_path",
+           "instrument_argument", "instrument_help", "method_argument", "paper_method_argument",
+           "parse_methods", "parse_numbers", "read_film"]
+
+#: What ``--method`` accepts, for the help texts.
+METHOD_HELP = "1, 2, 3, 4 (or method1 .. method4)"
+#: What a measurement file may be, for the messages.
+INPUT_KINDS = ("a measurement file (bayespig CSV, ASTM E1392 .astm, or a wide spectral table), or a "
+               "Revigo data folder containing '*spectral-data*.txt'")
+_SPECTRAL_DATA_GLOB = "*spectral-data*.txt"
+#: ``--method`` of ``infer`` and ``report``: every spelling -> the method (see ``method_name``).
+INFER_METHODS = {text: method_name(text) for text in ("1", "2", "3", "4", "method1", "method2", "method3",
+                                                      "method4", "auto", "general")}
+
+
+# ------------------------------------------------------------------------------------ outputs
+def check_output_path(path, kind="file"):
+    """Say in plain words, before any work, why ``path`` cannot be written.
+
+    Missing parent folders are fine (they are created when the output is written, not before);
+    the nearest existing one must be a folder in which files can be created (tried by
+    creating and removing an empty temporary folder in it).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The output a command was given.
+    kind : {"file", "folder"}
+        What the command writes there: one file, or a folder of files.
+
+    Returns
+    -------
+    pathlib.Path or None
+        The outermost folder that does not exist yet (the command creates it: remove it if the
+        command does not finish), or None when the parent folder exists.
+
+    Raises
+    ------
+    ValueError
+        ``cannot write the output: ...`` naming the path and the reason.
+    """
+    if kind not in ("file", "folder"):
+        raise ValueError(f"kind must be 'file' or 'folder', got {kind!r}")
+    path = Path(path)
+    if str(path) == "":
+        raise ValueError("cannot write the output: no path given")
+    if path.is_dir():
+        if kind == "file":
+            raise ValueError(f"cannot write the output: '{path}' is a folder; give the name of the file "
+                             "to write")
+        _check_writable_folder(path, path)
+        return None
+    if path.exists() or path.is_symlink():
+        if kind == "folder":
+            raise ValueError(f"cannot write the output: '{path}' exists and is a file, not a folder")
+        if not path.is_file() or not os.access(path, os.W_OK):
+            raise ValueError(f"cannot write the output: '{path}' exists and cannot be replaced")
+    # the folder output itself is created too; a file output creates its missing parents
+    missing, parent = (path.absolute() if kind == "folder" else None), path.absolute().parent
+    while not (parent.exists() or parent.is_symlink()):
+        missing, parent = parent, parent.parent
+    if not parent.is_dir():
+        raise ValueError(f"cannot write the output '{path}': '{_shown(parent, path)}' is a file, not a folder")
+    _check_writable_folder(parent, path)
+    return None if missing is None else _shown(missing, path)
+
+
+def _shown(folder, path):
+    """``folder`` as relative as ``path`` was given (for the messages and the clean-up)."""
+    return folder if Path(path).is_absolute() else Path(os.path.relpath(folder))
+
+
+def _check_writable_folder(folder, path):
+    try:
+        Path(tempfile.mkdtemp(prefix=".bayespig-write-check-", dir=folder)).rmdir()
+    except OSError:
+        raise ValueError(f"cannot write the output '{path}': the folder '{_shown(folder, path)}' is not "
+                         "writable") from None
+
+
+def add_output_argument(parser, *flags, kind, **kwargs):
+    """Add an output option whose path :func:`bayespig.cli.main` checks before the command runs.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+    *flags : str
+        Option strings, e.g. ``"--out"``.
+    kind : {"file", "folder"}
+        See :func:`check_output_path`.
+    **kwargs
+        Passed to ``parser.add_argument``.
+    """
+    action = parser.add_argument(*flags, **kwargs)
+    outputs = dict(parser.get_default("output_paths") or {})
+    outputs[action.dest] = kind
+    parser.set_defaults(output_paths=outputs)
+    return action
+
+
+# ------------------------------------------------------------------------------------- inputs
+def check_input_path(path):
+    """Say in plain words, before any work, why ``path`` is not a measurement input.
+
+    Raises
+    ------
+    ValueError
+        ``'<path>': file not found``, or for a folder that is not a Revigo data folder what
+        kinds of input are accepted.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"{path}: file not found")
+    if path.is_dir() and not any(path.glob(_SPECTRAL_DATA_GLOB)):
+        raise ValueError(f"'{path}' is a folder; give {INPUT_KINDS}")
+    return path
+
+
+def add_input_argument(parser, *flags, **kwargs):
+    """Add a measurement-file argument that :func:`bayespig.cli.main` checks before the command runs."""
+    action = parser.add_argument(*flags, **kwargs)
+    parser.set_defaults(input_paths=(*(parser.get_default("input_paths") or ()), action.dest))
+    return action
+
+
+# ---------------------------------------------------------------------------- how much is said
+def add_verbosity_arguments(parser, *, no_progress_alias=True):
+    """``-q/--quiet`` (``args.no_progress``) and ``-v/--verbose`` (``args.verbose``).
+
+    ``--quiet``: no progress output (results, warnings and errors are still printed);
+    ``--verbose``: on an error, also its traceback. ``--no-progress``, the older spelling of
+    ``--quiet``, stays as a hidden alias (``no_progress_alias=False`` where the command
+    declares it itself).
+    """
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("-q", "--quiet", dest="no_progress", action="store_true",
+                       help="no progress output (results, warnings and errors are still printed)")
+    if no_progress_alias:
+        group.add_argument("--no-progress", dest="no_progress", action="store_true", help=argparse.SUPPRESS)
+    group.add_argument("-v", "--verbose", action="store_true",
+                       help="on an error, also print its traceback (for a bug report)")
+
+
+# ----------------------------------------------------------------------- methods, instruments
+def method_argument(text):
+    """argparse ``type`` of ``--method``: a method (any spelling), ``auto`` or ``general``."""
+    try:
+        return method_name(text, argument="--method")
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def paper_method_argument(text):
+    """argparse ``type`` of ``--design``: one of the paper's methods (any spelling)."""
+    try:
+        return method_name(text, also=(), argument="--design")
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def instrument_help(what="instrument", default=None):
+    """Help text of an instrument option, listing the built-in names."""
+    text = (f"{what}: a built-in name ({', '.join(BUILT_IN_INSTRUMENTS)}) or comma-separated geometry "
+            "labels such as 45as15,45as110")
+    return text + (f" (default {default})" if default else "")
+
+
+def instrument_argument(name):
+    """A built-in instrument name, or comma-separated geometry labels such as ``45as15,45as110``.
+
+    Returns
+    -------
+    str or Instrument
+        The built-in name, or the instrument of the labels.
+
+    Raises
+    ------
+    ValueError
+        Listing the built-in names.
+    """
+    if name in BUILT_IN_INSTRUMENTS:
+        return name
+    try:
+        return get_instrument([label for label in name.split(",") if label.strip()])
+    except ValueError:
+        raise ValueError(
+            f"unknown instrument {name!r}; built-in instruments: {', '.join(BUILT_IN_INSTRUMENTS)} "
+            "(or comma-separated geometry labels such as 45as15,45as110)"
+        ) from None
 
 
 def parse_numbers(text, flag, *, positive=False):
@@ -35,12 +227,8 @@ def parse_numbers(text, flag, *, positive=False):
 
 def parse_methods(text, flag="--method"):
     """``1,4`` or ``method1,method4`` -> a tuple of the paper's method names."""
-    names = []
-    for item in (v.strip() for v in str(text).split(",") if v.strip()):
-        name = METHOD_NAMES.get(item, item)
-        if name not in METHOD_NAMES.values():
-            raise ValueError(f"{flag}: unknown method {item!r}; use 1, 2, 3, 4 (or method1..method4)")
-        names.append(name)
+    names = [method_name(item, also=(), argument=flag)
+             for item in (v.strip() for v in str(text).split(",") if v.strip())]
     if not names:
         raise ValueError(f"{flag}: no method given")
     return tuple(names)
@@ -52,12 +240,25 @@ def add_film_argument(parser):
                         help="for a spectral table of several films (Revigo): the film id, e.g. 04B")
 
 
-def read_film(path, film):
-    """The measurement file ``path`` as given (``film`` None) or the set of one film of a table."""
+def read_film(path, film, flag="--film"):
+    """The measurement file ``path`` as given (``film`` None) or the set of one film of a table.
+
+    Raises
+    ------
+    ValueError
+        When ``film`` is given for a file that holds one pigment (bayespig CSV, ASTM E1392).
+    """
     if film is None:
         return path
     from ..data import read_measurements
+    from ..data.io import file_format
 
+    # only a regular file is sniffed here: a pipe (<(cat f), /dev/stdin) can be read only once
+    kind = file_format(path) if os.path.isfile(path) else "spectral_table"
+    if kind != "spectral_table":
+        name = {"csv": "a bayespig CSV", "astm_e1392": "an ASTM E1392 file"}[kind]
+        raise ValueError(f"{flag} selects a film of a Revigo/wide spectral table; '{path}' is {name} "
+                         f"(one pigment, no films to choose from): leave out {flag} {film}")
     return read_measurements(path, film=film)
 
 

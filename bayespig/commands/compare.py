@@ -7,7 +7,15 @@ import sys
 
 import numpy as np
 
-from ._arguments import parse_methods, parse_numbers
+from ._arguments import (
+    METHOD_HELP,
+    add_input_argument,
+    add_output_argument,
+    add_verbosity_arguments,
+    instrument_help,
+    parse_methods,
+    parse_numbers,
+)
 
 __all__ = ["add_compare_parser", "run_compare"]
 
@@ -31,18 +39,22 @@ def add_compare_parser(subparsers):
         "pairs and checks its ranking of the methods; --map adds Fisher maps over the (a0, tau0) plane. "
         "Writes OUT/compare.html, compare.md, compare.json and figures.",
     )
-    parser.add_argument("--measurements", default=None, help="measurement file (compare the methods it supports)")
+    add_input_argument(parser, "--measurements", default=None,
+                       help="measurement file (compare the methods it supports)")
     parser.add_argument("--a", default=None, help="true a, one value or comma-separated per wavelength")
     parser.add_argument("--tau", default=None, help="true tau of the thin film, likewise")
     parser.add_argument("--wavelengths", default=None, help="wavelengths [nm] for --a/--tau lists")
-    parser.add_argument("--methods", default="1,2,3,4", help="methods, e.g. 1,4 (default all)")
-    parser.add_argument("--instrument", default="multi-angle-45", help="built-in instrument")
+    parser.add_argument("--methods", default="1,2,3,4",
+                        help=f"comma-separated methods, each {METHOD_HELP}, e.g. 1,4 (default all)")
+    parser.add_argument("--instrument", default="multi-angle-45", help=instrument_help(default="multi-angle-45"))
     parser.add_argument("--eps", type=float, default=0.05, help="relative error of eq. (7) (default 0.05)")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="seed of the simulations and the sampler (default 0)")
     parser.add_argument("--paper-points", action="store_true", help="the paper's nine (a0, tau0) pairs")
     parser.add_argument("--map", action="store_true", help="Fisher maps over the (a0, tau0) plane")
     parser.add_argument("--fisher-only", action="store_true", help="skip the full posteriors (seconds, not minutes)")
-    parser.add_argument("--out", required=True, help="output directory")
+    add_output_argument(parser, "--out", kind="folder", required=True,
+                        help="output folder (compare.html, compare.md, compare.json, figures)")
+    add_verbosity_arguments(parser)
     parser.set_defaults(func=run_compare)
     return parser
 

@@ -8,7 +8,8 @@ import sys
 import tomllib
 from pathlib import Path
 
-from ._arguments import parse_numbers
+from ..instruments import BUILT_IN_INSTRUMENTS
+from ._arguments import add_output_argument, add_verbosity_arguments, parse_numbers
 
 __all__ = ["add_design_parser", "run_design"]
 
@@ -63,7 +64,8 @@ def add_design_parser(subparsers):
     parser.add_argument("--thicknesses", default=None, help="film thicknesses you can make [um], e.g. 5,10,20")
     parser.add_argument("--substrates", default=None, help="substrates, e.g. black,white,grey:0.3")
     parser.add_argument("--instrument", default=None,
-                        help="instruments to consider, e.g. multi-angle-45,8d-sci (default multi-angle-45)")
+                        help="comma-separated instruments to consider, built-in names: "
+                        + ", ".join(BUILT_IN_INSTRUMENTS) + " (default multi-angle-45)")
     parser.add_argument("--eps", type=float, default=None, help="relative error of eq. (7) (default 0.05)")
     parser.add_argument("--draws", type=int, default=None, help="prior draws per band (default 32)")
     parser.add_argument("--seed", type=int, default=None, help="seed of the prior draws (default 0)")
@@ -73,7 +75,9 @@ def add_design_parser(subparsers):
     parser.add_argument("--no-glass", action="store_true", help="no film on glass (transmittance)")
     parser.add_argument("--check", type=int, default=None,
                         help="check the best N candidates by full posteriors on simulated data (default 0)")
-    parser.add_argument("--out", required=True, help="output directory")
+    add_output_argument(parser, "--out", kind="folder", required=True,
+                        help="output folder (design.html, design.md, design.json, figures)")
+    add_verbosity_arguments(parser)
     parser.set_defaults(func=run_design)
     return parser
 
@@ -81,6 +85,8 @@ def add_design_parser(subparsers):
 def read_design_file(path):
     """Settings from a JSON or TOML design file (unknown keys are an error)."""
     path = Path(path)
+    if not path.exists():
+        raise ValueError(f"{path}: file not found")
     try:
         text = path.read_bytes()
     except OSError as error:

@@ -10,7 +10,16 @@ import numpy as np
 
 from .._atomic import atomic_path
 from ._arguments import INFER_METHODS as _METHODS
-from ._arguments import add_film_argument, add_substrate_argument, read_film
+from ._arguments import (
+    METHOD_HELP,
+    add_film_argument,
+    add_input_argument,
+    add_output_argument,
+    add_substrate_argument,
+    add_verbosity_arguments,
+    method_argument,
+    read_film,
+)
 
 __all__ = ["add_infer_parser", "run_infer"]
 
@@ -26,11 +35,14 @@ def add_infer_parser(subparsers):
         "InferenceData (DIR/posterior.nc) and a per-wavelength summary (DIR/summary.csv). "
         "Wavelengths that did not converge (R-hat > 1.01, ESS < 400) are listed.",
     )
-    parser.add_argument("measurements", help="measurement file (bayespig CSV, ASTM E1392, spectral table)")
-    parser.add_argument("--method", default="auto", choices=sorted(_METHODS),
-                        help="the paper's method whose samples enter the likelihood (default auto: "
-                             "the most robust one the samples support)")
-    parser.add_argument("--out", required=True, help="output directory")
+    add_input_argument(parser, "measurements",
+                       help="measurement file (bayespig CSV, ASTM E1392, wide spectral table)")
+    parser.add_argument("--method", default="auto", type=method_argument, metavar="METHOD",
+                        help=f"the paper's method whose samples enter the likelihood: {METHOD_HELP}, "
+                             "auto (default: the most robust one the samples support) or general "
+                             "(every sample)")
+    add_output_argument(parser, "--out", kind="folder", required=True,
+                        help="output folder (posterior.nc, summary.csv)")
     add_film_argument(parser)
     add_substrate_argument(parser)
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
@@ -43,7 +55,7 @@ def add_infer_parser(subparsers):
     parser.add_argument("--ensembles", type=int, default=None,
                         help="independent ensembles = arviz chains (default 4)")
     parser.add_argument("--max-steps", type=int, default=None, help="cap on steps per wavelength")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_verbosity_arguments(parser)
     parser.set_defaults(func=run_infer)
     return parser
 

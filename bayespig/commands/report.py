@@ -7,6 +7,7 @@ import sys
 import warnings
 
 from ._arguments import INFER_METHODS as _METHODS
+from ._arguments import METHOD_HELP, add_input_argument, add_output_argument, add_verbosity_arguments, method_argument
 from ._arguments import add_film_argument, add_substrate_argument, read_film
 
 __all__ = ["add_demo_parser", "add_report_parser", "run_demo", "run_report"]
@@ -25,15 +26,16 @@ def add_report_parser(subparsers):
         "posterior.nc. Given a measurement file instead of a posterior (.nc), the posterior is "
         "inferred first (bayespig infer's defaults).",
     )
-    parser.add_argument("source", metavar="POSTERIOR_OR_MEASUREMENTS",
-                        help="posterior netCDF from 'bayespig infer' (.nc) or a measurement file")
-    parser.add_argument("--out", required=True, help="output directory")
-    parser.add_argument("--measurements", default=None,
-                        help="the measurement file of a posterior (thickness, concentration, truth)")
+    add_input_argument(parser, "source", metavar="POSTERIOR_OR_MEASUREMENTS",
+                       help="posterior netCDF from 'bayespig infer' (.nc) or a measurement file")
+    add_output_argument(parser, "--out", kind="folder", required=True,
+                        help="output folder (report.html, report.md, figures/, summary files)")
+    add_input_argument(parser, "--measurements", default=None,
+                       help="the measurement file of a posterior (thickness, concentration, truth)")
     add_film_argument(parser)
     add_substrate_argument(parser)
-    parser.add_argument("--method", default="auto", choices=sorted(_METHODS),
-                        help="when inferring: the paper's method (default auto)")
+    parser.add_argument("--method", default="auto", type=method_argument, metavar="METHOD",
+                        help=f"when inferring: the paper's method, {METHOD_HELP}, auto (default) or general")
     parser.add_argument("--seed", type=int, default=0, help="when inferring: random seed (default 0)")
     parser.add_argument("--g", default="isotropic", choices=("isotropic", "free"),
                         help="when inferring: g fixed at 0 (default) or a parameter")
@@ -43,6 +45,7 @@ def add_report_parser(subparsers):
                         help=f"colour-science illuminant name (default {DEFAULT_ILLUMINANT!r})")
     parser.add_argument("--title", default=None, help="report title")
     parser.add_argument("--no-progress", action="store_true", help="no progress output")
+    add_verbosity_arguments(parser, no_progress_alias=False)
     parser.set_defaults(func=run_report)
     return parser
 
@@ -102,12 +105,13 @@ def add_demo_parser(subparsers):
         "same film on black and white, multi-angle-45 instrument, eps 0.05), infer its posterior "
         "and write the uncertainty report.",
     )
-    parser.add_argument("--out", default=str(DEFAULT_OUT_DIR),
-                        help=f"output directory (default {DEFAULT_OUT_DIR})")
+    add_output_argument(parser, "--out", kind="folder", default=str(DEFAULT_OUT_DIR),
+                        help=f"output folder (default {DEFAULT_OUT_DIR})")
     parser.add_argument("--seed", type=int, default=0, help="seed of the noise and the sampler (default 0)")
     parser.add_argument("--quick", action="store_true",
                         help="shorter runs at every second wavelength (for tests)")
     parser.add_argument("--no-progress", action="store_true", help="no progress output")
+    add_verbosity_arguments(parser, no_progress_alias=False)
     parser.set_defaults(func=run_demo)
     return parser
 

@@ -2,11 +2,20 @@
 
 from __future__ import annotations
 
+import os
 import sys
+from pathlib import Path
 
 import numpy as np
 
-__all__ = ["add_revigo_parser", "run_revigo"]
+from ._arguments import add_output_argument, add_verbosity_arguments
+
+__all__ = ["REVIGO_SOURCE", "add_revigo_parser", "revigo_folder", "run_revigo"]
+
+#: Where the Revigo data come from, for the message when they are not found.
+REVIGO_SOURCE = ("the CC0 spectra of Geldof et al. (2018), Heritage Science 6:17, from "
+                 "https://github.com/fligt/revigo-spectra (data/revigo-aggregated-palette-spectral-data.txt "
+                 "and data/revigo-mixture-specifications.txt)")
 
 
 def add_revigo_parser(subparsers):
@@ -20,8 +29,10 @@ def add_revigo_parser(subparsers):
         "and write the report (reports/revigo.md). Takes a few minutes.",
     )
     parser.add_argument("path", nargs="?", default=None,
-                        help="Revigo folder (default $BAYESPIG_REVIGO or ../shared/data/revigo)")
-    parser.add_argument("--report", default="reports/revigo.md", help="Markdown report to write")
+                        help="folder of the Revigo data (default $BAYESPIG_REVIGO, else ../shared/data/revigo "
+                        "from the working folder); data: github.com/fligt/revigo-spectra")
+    add_output_argument(parser, "--report", kind="file", default="reports/revigo.md",
+                        help="Markdown report to write (default reports/revigo.md)")
     parser.add_argument("--specular", choices=("auto", "excluded", "included"), default="auto",
                         help="instrument hypothesis for the tints (default: decide from the evidence)")
     parser.add_argument("--posterior", action="store_true",
@@ -40,10 +51,36 @@ def add_revigo_parser(subparsers):
     parser.add_argument("--substrate-films", default=None, metavar="IDS",
                         help="with --posterior: sample the card factors for these films only (comma-separated "
                         "ids, or 'white-rich': the white and every 10/90 tint; default all, 1-4 min per film)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--quiet", action="store_true", help="no progress messages")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the posteriors and draws (default 0)")
+    add_verbosity_arguments(parser)
     parser.set_defaults(func=run_revigo)
     return parser
+
+
+def revigo_folder(path=None):
+    """The folder of the Revigo data: ``path``, else ``$BAYESPIG_REVIGO``, else the default.
+
+    Raises
+    ------
+    MeasurementError
+        When it does not exist: ``<folder>: file not found``, where it was looked for, where the
+        data come from and how to point at them.
+    """
+    from ..data.errors import MeasurementError, Problem
+    from ..studies.revigo import default_revigo_path
+
+    folder = Path(path) if path is not None else default_revigo_path()
+    if folder.exists():
+        return folder
+    if path is not None:
+        where = "the folder given"
+    elif os.environ.get("BAYESPIG_REVIGO"):
+        where = "from $BAYESPIG_REVIGO"
+    else:
+        where = "the default, ../shared/data/revigo from the working folder"
+    raise MeasurementError(Problem(f"file not found ({where}). The Revigo data are {REVIGO_SOURCE}; give "
+                                   "their folder as 'bayespig revigo FOLDER' or set BAYESPIG_REVIGO=FOLDER",
+                                   file=str(folder)))
 
 
 def run_revigo(args):
@@ -66,8 +103,9 @@ def run_revigo(args):
         raise ValueError(f"--substrate-sd must be >= 0, got {args.substrate_sd}")
     if args.draws < 10:
         raise ValueError(f"--draws must be >= 10, got {args.draws}")
-    progress = None if args.quiet else (lambda message: print(message, file=sys.stderr, flush=True))
-    study = revigo_study(args.path, specular=args.specular, progress=progress, posterior=args.posterior,
+    path = revigo_folder(args.path)
+    progress = None if args.no_progress else (lambda message: print(message, file=sys.stderr, flush=True))
+    study = revigo_study(path, specular=args.specular, progress=progress, posterior=args.posterior,
                          posterior_eps=eps, n_draws=args.draws, seed=args.seed,
                          g_sensitivity=G_SENSITIVITY if args.g_sensitivity is None else tuple(args.g_sensitivity),
                          substrate_sd=substrate_sd,

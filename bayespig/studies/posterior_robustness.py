@@ -19,18 +19,27 @@ says, while the RMS of point fits depends on where the fit's box stops them.
 from __future__ import annotations
 
 import datetime
+import sys
 import time
 import warnings
+from collections.abc import Iterable
 
 import numpy as np
 
 from .._atomic import write_text_atomically
+from ..likelihood import method_name
 from .robustness import PAPER_A0, PAPER_METHODS, PAPER_TAU0, robustness_study
 
 __all__ = ["posterior_robustness", "write_posterior_tables"]
 
 #: Label wavelengths of the (a0, tau0) cases packed into one simulated set [nm].
 _FIRST_LABEL_NM = 1000.0
+
+
+def _method_names(methods):
+    """One method or a sequence of them, in any spelling -> tuple of ``"method1"`` .. ``"method4"``."""
+    one = isinstance(methods, (str, int, np.integer)) or not isinstance(methods, Iterable)
+    return tuple(method_name(m, also=()) for m in ((methods,) if one else methods))
 
 
 def _instrument_name(instrument):
@@ -44,8 +53,8 @@ def posterior_robustness(methods=PAPER_METHODS, a0_values=PAPER_A0, tau0_values=
 
     Parameters
     ----------
-    methods : sequence of str
-        ``"method1"`` .. ``"method4"``.
+    methods : str, int or sequence of them
+        The paper's method(s), ``"method1"`` .. ``"method4"`` or ``1`` .. ``4``.
     a0_values, tau0_values : sequence of float
         True values; every pair is a case (the paper's 3 x 3 by default).
     eps : float
@@ -60,6 +69,7 @@ def posterior_robustness(methods=PAPER_METHODS, a0_values=PAPER_A0, tau0_values=
         For the emcee runs and the refits (default: local pool of 2 processes).
     settings : InferenceSettings, optional
     progress : bool
+        Progress on stderr: a bar over the refits, then one line and a bar per method's posterior.
 
     Returns
     -------
@@ -74,11 +84,16 @@ def posterior_robustness(methods=PAPER_METHODS, a0_values=PAPER_A0, tau0_values=
 
     if not (np.isfinite(eps) and eps > 0):
         raise ValueError(f"eps must be > 0 for the posterior (the likelihood divides by it), got {eps}")
+    methods = _method_names(methods)
     pairs = [(float(a0), float(tau0)) for tau0 in tau0_values for a0 in a0_values]
-    grid = robustness_study(tuple(methods), tuple(a0_values), tuple(tau0_values), eps=eps,
-                            n_repeat=n_repeat, seed=seed, instrument=instrument, executor=executor)
+    grid = robustness_study(methods, tuple(a0_values), tuple(tau0_values), eps=eps,
+                            n_repeat=n_repeat, seed=seed, instrument=instrument, executor=executor,
+                            progress=progress)
     records = []
     for k, method in enumerate(methods):
+        if progress:
+            print(f"posterior robustness: {method}, {len(pairs)} case{'s' if len(pairs) != 1 else ''}",
+                  file=sys.stderr, flush=True)
         a = np.array([p[0] for p in pairs])
         tau = np.array([p[1] for p in pairs])
         measurements = simulate(a=a, tau=tau, design=method, instrument=instrument,
@@ -94,7 +109,7 @@ def posterior_robustness(methods=PAPER_METHODS, a0_values=PAPER_A0, tau0_values=
         for j, (a0, tau0) in enumerate(pairs):
             row = summary.iloc[j]
             draws = tau_post.values[..., j].ravel()
-            frequentist = grid[method, a0, tau0] if len(methods) * len(pairs) > 1 else grid
+            frequentist = grid[method, a0, tau0]
             r_hat = max(row["a_r_hat"], row["tau_r_hat"])
             ess = min(row[f"{p}_ess_{kind}"] for p in ("a", "tau") for kind in ("bulk", "tail"))
             records.append({
@@ -120,8 +135,10 @@ def _ratio(x, y):
 def write_posterior_tables(path="reports/posterior-robustness.md", *, seed=0, eps=0.05,
                            instrument="multi-angle-45", n_repeat=1000, executor=None, settings=None,
                            methods=PAPER_METHODS, a0_values=PAPER_A0, tau0_values=PAPER_TAU0,
-                           command="bayespig robustness --posterior"):
+                           command="bayespig robustness --posterior", progress=False):
     """Run :func:`posterior_robustness` and write the Markdown report atomically.
+
+    ``progress`` shows the progress of the refits and of the posteriors on stderr.
 
     Returns
     -------
@@ -132,10 +149,11 @@ def write_posterior_tables(path="reports/posterior-robustness.md", *, seed=0, ep
     from ..inference import InferenceSettings
 
     started = time.perf_counter()
+    methods = _method_names(methods)
     settings = InferenceSettings() if settings is None else settings
     records = posterior_robustness(methods, a0_values, tau0_values, eps=eps, seed=seed,
                                    instrument=instrument, n_repeat=n_repeat, executor=executor,
-                                   settings=settings)
+                                   settings=settings, progress=progress)
     elapsed = time.perf_counter() - started
     now = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M")
     lines = [

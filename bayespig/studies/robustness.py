@@ -32,7 +32,10 @@ import datetime
 import json
 import os
 import platform
+import signal
+import sys
 import time
+from collections.abc import Iterable
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -46,6 +49,7 @@ from ..data.model import BLACK_SUBSTRATE_ALBEDO, WHITE_SUBSTRATE_ALBEDO
 from ..data.simulate import DESIGNS
 from ..fit import FitSettings, film_term, fit_batch
 from ..instruments import get_instrument, predict
+from ..likelihood import method_name
 from ..physics.forward import specular_transmittance
 from ..table import cache_directory, load_table
 
@@ -309,7 +313,7 @@ class RobustnessGrid:
 
     def __getitem__(self, key):
         method, a0, tau0 = key
-        return self.results[(method, float(a0), float(tau0))]
+        return self.results[(method_name(method, also=()), float(a0), float(tau0))]
 
     def statistic(self, name):
         """Array (n_methods, n_a0, n_tau0) of one of :data:`STATISTICS`."""
@@ -473,32 +477,76 @@ def _run_case(case):
 _COST = {"method3": 4, "method4": 2, "method2": 2, "method1": 1}
 
 
+def _ignore_interrupts():
+    """Worker initializer: Ctrl-C is the parent's to handle (it cancels the cases and says so once)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _local_pool():
+    """A local pool of 2 processes whose workers leave Ctrl-C to the parent."""
+    return ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1), initializer=_ignore_interrupts)
+
+
+def _stop_pool(pool, interrupted):
+    """Shut a local pool down; after Ctrl-C without waiting for the running cases (their
+    workers are terminated: nothing of theirs is kept)."""
+    if interrupted:
+        for process in list((getattr(pool, "_processes", None) or {}).values()):
+            process.terminate()
+    pool.shutdown(cancel_futures=True)
+
+
 @contextmanager
 def _executor_or_local(executor, n_cases):
     """The given executor, or a local pool of 2 processes when there are several cases."""
     if executor is not None or n_cases < 2:
         yield executor
         return
-    pool = ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1))
+    pool = _local_pool()
     try:
         yield pool
-    finally:
-        pool.shutdown()
+    except KeyboardInterrupt:
+        _stop_pool(pool, interrupted=True)
+        raise
+    else:
+        _stop_pool(pool, interrupted=False)
 
 
-def _run_cases(cases, executor):
+def _progress_bar(total, progress):
+    """A tqdm bar (stderr) over ``total`` refits, or None without ``progress``."""
+    if not progress:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc="robustness", unit="fit", file=sys.stderr)
+
+
+def _run_cases(cases, executor, bar=None):
+    """Results of every case in order; ``bar`` (tqdm) advances by each finished case's refits."""
     order = sorted(range(len(cases)), key=lambda i: -_COST[cases[i].method])
     with _executor_or_local(executor, len(cases)) as pool:
+        results = {}
         if pool is None:
-            return [_run_case(case) for case in cases]
-        futures = {i: pool.submit(_run_case, cases[i]) for i in order}
-        return [futures[i].result() for i in range(len(cases))]
+            order = range(len(cases))
+        else:
+            futures = {i: pool.submit(_run_case, cases[i]) for i in order}
+        for i in order:
+            results[i] = _run_case(cases[i]) if pool is None else futures[i].result()
+            if bar is not None:
+                bar.update(cases[i].n_repeat)
+        return [results[i] for i in range(len(cases))]
+
+
+def _method_names(method):
+    """One method or a sequence of them, in any spelling (4, "4", "method4") -> tuple of names."""
+    one = isinstance(method, (str, int, np.integer)) or not isinstance(method, Iterable)
+    names = tuple(method_name(m, also=()) for m in ((method,) if one else method))
+    if not names:
+        raise ValueError("method: no method given")
+    return names
 
 
 def _check_case_arguments(methods, a0_values, tau0_values, eps, n_repeat, seed):
-    for method in methods:
-        if method not in PAPER_METHODS:
-            raise ValueError(f"method must be one of {', '.join(PAPER_METHODS)}, got {method!r}")
     for a0 in a0_values:
         if not (np.isfinite(a0) and 0.0 <= a0 <= 1.0):
             raise ValueError(f"a0 (relative absorption) must lie in [0, 1], got {a0!r}")
@@ -514,9 +562,11 @@ def _check_case_arguments(methods, a0_values, tau0_values, eps, n_repeat, seed):
 
 
 def _grid(
-    methods, a0_values, tau0_values, *, eps, n_repeat, seed, instrument, executor, fit_settings
+    methods, a0_values, tau0_values, *, eps, n_repeat, seed, instrument, executor, fit_settings,
+    progress=False, bar=None,
 ):
-    methods = tuple(methods)
+    """The grid of every (method, a0, tau0); progress on ``bar`` (shared), else a bar of its own."""
+    methods = _method_names(methods)
     a0_values = tuple(float(a) for a in np.atleast_1d(a0_values))
     tau0_values = tuple(float(t) for t in np.atleast_1d(tau0_values))
     _check_case_arguments(methods, a0_values, tau0_values, eps, n_repeat, seed)
@@ -533,7 +583,14 @@ def _grid(
         for a in a0_values
         for t in tau0_values
     ]
-    results = _run_cases(cases, executor)
+    own_bar = bar is None and progress
+    if own_bar:
+        bar = _progress_bar(len(cases) * int(n_repeat), progress)
+    try:
+        results = _run_cases(cases, executor, bar)
+    finally:
+        if own_bar:
+            bar.close()
     return RobustnessGrid(
         methods,
         a0_values,
@@ -553,13 +610,15 @@ def robustness_study(
     instrument="multi-angle-45",
     executor=None,
     fit_settings=None,
+    progress=False,
 ):
     """The paper's robustness test (section 4.1) for one case, or for a grid of cases.
 
     Parameters
     ----------
-    method : str or sequence of str
-        ``"method1"`` .. ``"method4"``.
+    method : str, int or sequence of them
+        The paper's method(s): ``"method1"`` .. ``"method4"``, or ``1`` .. ``4`` / ``"1"`` ..
+        ``"4"`` (see :func:`bayespig.likelihood.method_name`).
     a0 : float or sequence of float
         True relative absorption [-].
     tau0 : float or sequence of float
@@ -579,6 +638,8 @@ def robustness_study(
         several cases, none for one.
     fit_settings : FitSettings, optional
         Bounds, objective and start of the fits (default :class:`~bayespig.fit.FitSettings`).
+    progress : bool
+        Show a progress bar over the refits on stderr (tqdm).
 
     Returns
     -------
@@ -590,8 +651,8 @@ def robustness_study(
     ----------
     Ershov, Voloboy & Pozdnyakov (2023), section 4.1, eq. (7), Tables 1–2.
     """
-    single = isinstance(method, str) and np.ndim(a0) == 0 and np.ndim(tau0) == 0
-    methods = (method,) if isinstance(method, str) else tuple(method)
+    single = isinstance(method, (str, int, np.integer)) and np.ndim(a0) == 0 and np.ndim(tau0) == 0
+    methods = _method_names(method)
     grid = _grid(
         methods,
         a0,
@@ -602,6 +663,7 @@ def robustness_study(
         instrument=instrument,
         executor=executor,
         fit_settings=fit_settings,
+        progress=progress,
     )
     return grid[methods[0], float(a0), float(tau0)] if single else grid
 
@@ -617,17 +679,19 @@ def robustness_map(
     instrument="multi-angle-45",
     executor=None,
     fit_settings=None,
+    progress=False,
 ):
     """Robustness over the ``(a0, tau0)`` plane: the paper's tables generalised.
 
     Parameters
     ----------
-    methods : sequence of str
+    methods : str, int or sequence of them
+        The paper's method(s), in any spelling (as for :func:`robustness_study`).
     a0_values : array_like, optional
         Default ``[0.01, 0.02, 0.05, 0.1, 0.2, 0.4]`` [-].
     tau0_values : array_like, optional
         Default ``[0.25, 0.5, 1, 2, 4]`` [-].
-    eps, n_repeat, seed, instrument, executor, fit_settings
+    eps, n_repeat, seed, instrument, executor, fit_settings, progress
         As for :func:`robustness_study`.
 
     Returns
@@ -636,8 +700,6 @@ def robustness_map(
     """
     a0_values = (0.01, 0.02, 0.05, 0.1, 0.2, 0.4) if a0_values is None else a0_values
     tau0_values = (0.25, 0.5, 1.0, 2.0, 4.0) if tau0_values is None else tau0_values
-    if isinstance(methods, str):
-        methods = (methods,)
     return _grid(
         methods,
         a0_values,
@@ -648,6 +710,7 @@ def robustness_map(
         instrument=instrument,
         executor=executor,
         fit_settings=fit_settings,
+        progress=progress,
     )
 
 
@@ -666,7 +729,7 @@ def opacity_contrast(method, a0, tau0, instrument="multi-angle-45"):
     """
     instrument = get_instrument(instrument)
     out = {}
-    for name, truth, group, r_s, kind in _design(method, a0, tau0, instrument):
+    for name, truth, group, r_s, kind in _design(method_name(method, also=()), a0, tau0, instrument):
         if kind == "reflectance" and group is not None:
             opaque = predict(instrument, a=a0, tau=np.inf, r_s=r_s)
             out[name] = float(np.sqrt(np.sum(np.log(truth / opaque) ** 2)))
@@ -916,6 +979,7 @@ def write_paper_tables(
     extras=True,
     escape_repeats=20000,
     command="bayespig robustness --paper",
+    progress=False,
 ):
     """Regenerate the paper's Tables 1 and 2 beside bayespig's, with the analysis, as Markdown.
 
@@ -940,6 +1004,8 @@ def write_paper_tables(
         Replicates for the escape probabilities at ``tau0 = 2``.
     command : str
         The command that regenerates the file, stated in it.
+    progress : bool
+        Show one progress bar over every refit of every study on stderr (tqdm).
 
     Returns
     -------
@@ -948,49 +1014,37 @@ def write_paper_tables(
     """
     started = time.perf_counter()
     common = {"eps": eps, "seed": seed}
+    # every study of the report: name -> (methods, a0, tau0, replicates, instrument, fit settings)
+    studies = {"main": (PAPER_METHODS, PAPER_A0, PAPER_TAU0, n_repeat, instrument, None),
+               "alternative": (PAPER_METHODS, PAPER_A0, PAPER_TAU0, n_repeat, alternative_instrument, None)}
+    if extras:
+        for bound in (10.0, 20.0):
+            studies[f"tau_max_{bound:g}"] = (PAPER_METHODS, PAPER_A0, PAPER_TAU0, n_repeat, instrument,
+                                             FitSettings(tau_bounds=(1e-3, bound)))
+        for objective in ("log", "absolute"):
+            studies[f"objective_{objective}"] = (PAPER_METHODS, PAPER_A0, PAPER_TAU0, n_repeat, instrument,
+                                                 FitSettings(objective=objective))
+        for tau_start in LOCAL_START_TAUS:
+            studies[f"local_start_{tau_start:g}"] = (("method2", "method4"), PAPER_A0, (2.0,), n_repeat,
+                                                     instrument, FitSettings(start=(0.1, tau_start)))
+        studies["escape"] = (("method2", "method4"), PAPER_A0, (2.0,), escape_repeats, instrument, None)
+    total = sum(len(m) * len(a) * len(t) * repeats for m, a, t, repeats, _, _ in studies.values())
     own = executor is None
-    pool = ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) if own else executor
-    grids = {}
+    pool = _local_pool() if own else executor
+    bar = _progress_bar(total, progress)
+    grids, interrupted = {}, False
     try:
-
-        def run(
-            methods=PAPER_METHODS,
-            a0=PAPER_A0,
-            tau0=PAPER_TAU0,
-            repeats=n_repeat,
-            inst=instrument,
-            settings=None,
-        ):
-            return _grid(
-                methods,
-                a0,
-                tau0,
-                n_repeat=repeats,
-                instrument=inst,
-                executor=pool,
-                fit_settings=settings,
-                **common,
-            )
-
-        grids["main"] = run()
-        grids["alternative"] = run(inst=alternative_instrument)
-        if extras:
-            for bound in (10.0, 20.0):
-                grids[f"tau_max_{bound:g}"] = run(settings=FitSettings(tau_bounds=(1e-3, bound)))
-            for objective in ("log", "absolute"):
-                grids[f"objective_{objective}"] = run(settings=FitSettings(objective=objective))
-            for tau_start in LOCAL_START_TAUS:
-                grids[f"local_start_{tau_start:g}"] = run(
-                    methods=("method2", "method4"),
-                    tau0=(2.0,),
-                    settings=FitSettings(start=(0.1, tau_start)),
-                )
-            grids["escape"] = run(
-                methods=("method2", "method4"), tau0=(2.0,), repeats=escape_repeats
-            )
+        for name, (methods, a0, tau0, repeats, inst, settings) in studies.items():
+            grids[name] = _grid(methods, a0, tau0, n_repeat=repeats, instrument=inst, executor=pool,
+                                fit_settings=settings, bar=bar, **common)
+    except KeyboardInterrupt:
+        interrupted = True
+        raise
     finally:
+        if bar is not None:
+            bar.close()
         if own:
-            pool.shutdown()
+            _stop_pool(pool, interrupted)
     text = _report(grids, command=command, elapsed=time.perf_counter() - started, eps=eps)
     write_text_atomically(path, text)
     return grids

@@ -228,9 +228,49 @@ def test_executors_give_identical_results():
             np.testing.assert_array_equal(grid.results[key].tau, reference.results[key].tau)
 
 
+def test_a_method_in_any_spelling():
+    """``4``, ``"4"`` and ``"method4"`` are the same study (issue 18: ``robustness_study(4, ...)``
+    raised ``TypeError: 'int' object is not iterable``)."""
+    reference = robustness_study("method4", 0.1, 1.0, n_repeat=8, seed=0)
+    for spelling in (4, "4", np.int64(4)):
+        result = robustness_study(spelling, 0.1, 1.0, n_repeat=8, seed=0)
+        assert result.method == "method4"
+        np.testing.assert_array_equal(result.tau, reference.tau)
+    grid = robustness_study([1, "method4"], 0.1, (0.5, 1.0), n_repeat=4, seed=0)
+    assert grid.methods == ("method1", "method4")
+    np.testing.assert_array_equal(grid[4, 0.1, 1.0].tau, grid["method4", 0.1, 1.0].tau)
+    assert robustness_map(3, [0.1], [1.0], n_repeat=3).methods == ("method3",)
+    assert opacity_contrast(4, 0.1, 1.0) == opacity_contrast("method4", 0.1, 1.0)
+    with pytest.raises(TypeError, match="method must be a method number or name"):
+        robustness_study(None, 0.1, 1.0, n_repeat=8)
+
+
+def test_progress_bar_counts_the_refits(capsys):
+    robustness_study((1, 4), 0.1, (0.5, 1.0), n_repeat=3, seed=0, progress=True)
+    err = capsys.readouterr().err
+    assert "robustness: 100%" in err and "12/12" in err  # 2 methods x 2 cases x 3 refits
+    robustness_study(1, 0.1, 0.5, n_repeat=3, seed=0)
+    assert capsys.readouterr().err == ""
+
+
+def test_posterior_robustness_shows_its_progress_and_takes_a_method_number(tmp_path, capsys):
+    """``bayespig robustness --posterior`` ran 51 s without a word (issue 18)."""
+    from bayespig.inference import InferenceSettings
+    from bayespig.studies.posterior_robustness import write_posterior_tables
+
+    records = write_posterior_tables(tmp_path / "p.md", methods=(4,), a0_values=(0.1,), tau0_values=(1.0,),
+                                     n_repeat=4, settings=InferenceSettings(draws_per_chain=256, target_ess=100),
+                                     progress=True)
+    assert [r["method"] for r in records] == ["method4"]
+    err = capsys.readouterr().err
+    assert "robustness: 100%" in err and "4/4" in err  # the refits
+    assert "posterior robustness: method4, 1 case\n" in err and "inference: 100%" in err
+    assert "## method4" in (tmp_path / "p.md").read_text(encoding="utf-8")
+
+
 def test_bad_arguments_raise_value_errors():
     for kwargs, match in (
-        ({"method": "method5"}, "method must be one of method1, method2, method3, method4"),
+        ({"method": "method5"}, "unknown method .method5.: method must be one of 1, 2, 3, 4, method1, method2, method3, method4$"),
         ({"a0": 1.5}, "a0"),
         ({"tau0": 0.0}, "tau0"),
         ({"tau0": 500.0}, "tau0 must be <= 128"),
@@ -259,11 +299,14 @@ def test_robustness_map_and_its_figure(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["map.json", "map.png"]
 
 
-def test_paper_tables_report_is_written_with_both_tables(tmp_path):
+def test_paper_tables_report_is_written_with_both_tables(tmp_path, capsys):
     path = tmp_path / "paper-tables.md"
     grids = write_paper_tables(
-        path, n_repeat=10, extras=False, command="bayespig robustness --paper"
+        path, n_repeat=10, extras=False, command="bayespig robustness --paper", progress=True
     )
+    # one progress bar on stderr over every refit: 4 methods x 9 pairs x 2 instruments x 10
+    err = capsys.readouterr().err
+    assert "robustness: 100%" in err and "720/720" in err
     text = path.read_text()
     assert "`bayespig robustness --paper`" in text
     for heading in (
