@@ -5,9 +5,11 @@ from __future__ import annotations
 import os
 import sys
 import warnings
+from pathlib import Path
 
 from ._arguments import INFER_METHODS as _METHODS
 from ._arguments import add_film_argument, add_substrate_argument, read_film
+from .infer import eps_argument
 
 __all__ = ["add_demo_parser", "add_report_parser", "run_demo", "run_report"]
 
@@ -37,6 +39,10 @@ def add_report_parser(subparsers):
     parser.add_argument("--seed", type=int, default=0, help="when inferring: random seed (default 0)")
     parser.add_argument("--g", default="isotropic", choices=("isotropic", "free"),
                         help="when inferring: g fixed at 0 (default) or a parameter")
+    parser.add_argument("--eps", default=None,
+                        help="when inferring: relative measurement error of eq. (7), a number (e.g. "
+                             "0.02 for 2 %%) or 'infer' (default: the file's eps, else 0.05 - an "
+                             "assumption the report says; see the user guide for typical values)")
     parser.add_argument("--observer", default=DEFAULT_OBSERVER,
                         help=f"colour-science observer name (default {DEFAULT_OBSERVER!r})")
     parser.add_argument("--illuminant", default=DEFAULT_ILLUMINANT,
@@ -58,11 +64,16 @@ def _print_warnings(caught):
 def run_report(args):
     """Run ``bayespig report``; returns the exit status."""
     from ..report import write_report
+    from ..report.write import NETCDF_SUFFIXES
 
     if not os.path.exists(args.source):
         raise ValueError(f"{args.source}: no such file")
+    eps = eps_argument(args.eps)
+    if eps is not None and Path(args.source).suffix.lower() in NETCDF_SUFFIXES:
+        raise ValueError(f"--eps: {args.source} is a posterior, inferred with its own eps; --eps applies "
+                         "only when report infers from a measurement file (or run bayespig infer --eps)")
     infer_kwargs = {"method": _METHODS[args.method], "seed": args.seed, "g": args.g,
-                    "substrate_sd": args.substrate_sd}
+                    "substrate_sd": args.substrate_sd, "eps": eps, "eps_given_as": "--eps"}
     source = read_film(args.source, args.film)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -84,8 +95,11 @@ def _print_result(result):
     colour = summary["colour"]
     if colour.get("available"):
         verdict = "good enough" if colour["good_enough_for_colour_matching"] else "NOT good enough"
+        hedge = ""
+        if colour.get("verdict_assumes_eps"):
+            hedge = " if eps is the assumed 0.05 (pass --eps with your instrument's value)"
         print(f"colour spread of the measured samples: dE00 <= {colour['max_dE00_spread_measured']:.2f} "
-              f"(95th percentile) - {verdict} for colour matching")
+              f"(95th percentile) - {verdict} for colour matching{hedge}")
     if flags:
         print(f"{len(flags)} wavelength(s) flagged: "
               + ", ".join(f"{f['wavelength_nm']:g} nm" for f in flags), file=sys.stderr)

@@ -41,6 +41,8 @@ from ..likelihood import FilmTerm, Priors, Problem
 
 __all__ = [
     "COLOUR_MATCH_DELTA_E",
+    "DEFAULT_EPS",
+    "EPS_SOURCE_ATTR",
     "ESS_MIN",
     "PPC_LEVEL",
     "RHAT_MAX",
@@ -53,11 +55,15 @@ __all__ = [
     "colour_spectrum",
     "default_unmeasured_films",
     "diagnostics",
+    "eps_origin",
     "eps_per_value",
+    "eps_source",
     "extinction",
     "film_colour",
     "measured_colour",
+    "model_check_status",
     "parameter_bands",
+    "parameters_per_wavelength",
     "posterior_draws",
     "posterior_predictive_check",
     "predicted_film_values",
@@ -65,6 +71,7 @@ __all__ = [
     "problem_from_inference",
     "provenance",
     "ravine",
+    "record_eps_source",
     "residuals_in_eps",
     "value_table",
     "wavelengths",
@@ -407,6 +414,90 @@ def eps_per_value(idata):
     return eps
 
 
+#: bayespig.infer's eps when neither the call nor the file gives one [-] (paper eq. 7).
+DEFAULT_EPS = 0.05
+#: Posterior attribute recording where a known eps came from (:func:`record_eps_source`).
+EPS_SOURCE_ATTR = "eps_source"
+
+
+def eps_source(eps, measurements, *, given_as="--eps"):
+    """Where the ``eps`` of a run of :func:`bayespig.infer` comes from.
+
+    Mirrors ``infer``'s rule: a sample's own ``eps`` (a file column) first, then the ``eps``
+    argument, then the measurement set's metadata ``eps``, then :data:`DEFAULT_EPS`.
+
+    Parameters
+    ----------
+    eps : float, "infer" or None
+        The ``eps`` argument of ``infer``.
+    measurements : MeasurementSet
+    given_as : str
+        How the user gave ``eps`` (``"--eps"`` on the command line, ``"eps="`` in Python).
+
+    Returns
+    -------
+    dict
+        ``kind``: ``"inferred"``, ``"given"``, ``"file"`` or ``"default"``; ``as``: ``given_as``
+        for ``"given"``.
+    """
+    if isinstance(eps, str) and eps == "infer":
+        return {"kind": "inferred"}
+    samples = tuple(getattr(measurements, "samples", ()) or ())
+    if samples and all(getattr(sample, "eps", None) is not None for sample in samples):
+        return {"kind": "file"}
+    if eps is not None:
+        return {"kind": "given", "as": given_as}
+    metadata = getattr(measurements, "metadata", None) or {}
+    value = metadata.get("eps") if isinstance(metadata, dict) else None
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
+        return {"kind": "file"}
+    return {"kind": "default"}
+
+
+def record_eps_source(idata, source):
+    """Store :func:`eps_source`'s answer in the posterior's attributes (JSON text)."""
+    idata.posterior.attrs[EPS_SOURCE_ATTR] = json.dumps(source)
+    return idata
+
+
+def eps_origin(idata):
+    """The report's words for the posterior's ``eps`` and where it came from.
+
+    Returns
+    -------
+    dict
+        ``kind`` (as :func:`eps_source`, or ``"unknown"`` when the posterior does not record
+        it), ``value`` (the known eps, its median over values; None when inferred),
+        ``assumed`` (True when eps is bayespig's default -- or may be: unrecorded and equal to
+        it), ``why`` (for an assumed eps) and ``text``, e.g. ``"eps assumed: 0.05 (the default;
+        pass --eps)"``, ``"eps given: 0.02 (--eps)"``, ``"eps inferred"``.
+    """
+    if "eps" in idata.posterior:
+        return {"kind": "inferred", "value": None, "assumed": False, "why": "",
+                "text": "eps inferred (a parameter per wavelength)"}
+    recorded = _json_attr(_attrs(idata).get(EPS_SOURCE_ATTR))
+    kind = recorded.get("kind", "unknown") if isinstance(recorded, dict) else "unknown"
+    values = eps_per_value(idata)
+    finite = values[np.isfinite(values)]
+    value = float(np.median(finite)) if finite.size else float("nan")
+    spread = finite.size and np.ptp(finite) > 0
+    shown = (f"{finite.min():g}-{finite.max():g} (per sample)" if spread else f"{value:g}")
+    if kind == "default":
+        return {"kind": kind, "value": value, "assumed": True, "why": "the default",
+                "text": f"eps assumed: {shown} (the default; pass --eps)"}
+    if kind == "given":
+        return {"kind": kind, "value": value, "assumed": False, "why": "",
+                "text": f"eps given: {shown} ({recorded.get('as', '--eps')})"}
+    if kind == "file":
+        return {"kind": kind, "value": value, "assumed": False, "why": "",
+                "text": f"eps given: {shown} (the measurement file)"}
+    assumed = bool(np.isclose(value, DEFAULT_EPS) and not spread)
+    return {"kind": "unknown", "value": value, "assumed": assumed,
+            "why": "the posterior does not record where it came from; it equals the default" if assumed else "",
+            "text": f"eps known: {shown} (where it came from is not recorded in the posterior"
+                    + ("; it equals the default, so it may only be assumed" if assumed else "") + ")"}
+
+
 def residuals_in_eps(idata, max_draws=None):
     """Residuals of every measured value in units of its relative error (paper eq. 7).
 
@@ -474,6 +565,11 @@ def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
     misfit (it grows until the values fit), so the check then says little: read the ``eps``
     posterior instead.
 
+    A wavelength with no more measured values than parameters (an 8°/d film on black and
+    white: 2 values for ``a`` and ``tau``) cannot be tested: some parameters reproduce any
+    values there, so ``p`` says nothing. Such wavelengths are ``testable = False``, never
+    flagged, and :func:`model_check_status` calls them "not testable".
+
     Parameters
     ----------
     idata : arviz.InferenceData
@@ -489,7 +585,9 @@ def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
         ``p_value`` (n_wavelengths,); ``chi2`` (n_wavelengths,): ``T`` at the posterior-mean
         prediction; ``n_values`` (n_wavelengths,); ``flagged``: bool (n_wavelengths,);
         ``worst``: per wavelength the index of the value with the largest ``|z|``
-        (:func:`residuals_in_eps`), and ``z`` (n_wavelengths, n_values); ``level``.
+        (:func:`residuals_in_eps`), and ``z`` (n_wavelengths, n_values); ``level``;
+        ``n_parameters`` (n_wavelengths,) from :func:`parameters_per_wavelength` and
+        ``testable``: bool (n_wavelengths,), ``n_values > n_parameters``.
 
     Raises
     ------
@@ -525,8 +623,58 @@ def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
         z = (observed - mean) / (eps_mean * mean)
     chi2 = np.nansum(np.where(measured, z * z, 0.0), axis=-1)
     worst = np.argmax(np.where(measured, np.abs(np.nan_to_num(z, nan=np.inf)), -1.0), axis=-1)
-    return {"p_value": p_value, "chi2": chi2, "n_values": n_values, "flagged": p_value < level,
-            "worst": worst, "z": z, "level": float(level)}
+    n_parameters = np.full(n_values.shape, parameters_per_wavelength(idata))
+    testable = n_values > n_parameters
+    return {"p_value": p_value, "chi2": chi2, "n_values": n_values, "flagged": testable & (p_value < level),
+            "worst": worst, "z": z, "level": float(level), "n_parameters": n_parameters,
+            "testable": testable}
+
+
+def parameters_per_wavelength(idata):
+    """How many parameters the posterior has at each wavelength.
+
+    ``a``, one ``tau`` per film group, ``g`` when free, ``eps`` when inferred; parameters
+    shared by all wavelengths (the cards' albedo factors) are not counted.
+
+    Returns
+    -------
+    int
+    """
+    posterior = idata.posterior
+    count = int("a" in posterior)
+    if "tau_group" in posterior:
+        count += int(posterior["tau_group"].sizes["group"])
+    elif "tau" in posterior:
+        count += 1
+    for name in ("g", "eps"):
+        if name in posterior:
+            count += int(np.prod([size for dim, size in posterior[name].sizes.items()
+                                  if dim not in ("chain", "draw", "wavelength")], dtype=int))
+    return count
+
+
+def model_check_status(check):
+    """Per wavelength, the model check's verdict in words.
+
+    Parameters
+    ----------
+    check : dict
+        From :func:`posterior_predictive_check`.
+
+    Returns
+    -------
+    list of str
+        ``"pass"``, ``"misfit (p < 0.01)"`` or ``"not testable (2 values <= 2 parameters)"``.
+    """
+    out = []
+    for i in range(len(check["p_value"])):
+        if not check["testable"][i]:
+            out.append(f"not testable ({check['n_values'][i]} values <= {check['n_parameters'][i]} parameters)")
+        elif check["flagged"][i]:
+            out.append(f"misfit (p < {check['level']:g})")
+        else:
+            out.append("pass")
+    return out
 
 
 # ------------------------------------------------------------------------------------------

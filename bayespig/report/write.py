@@ -9,9 +9,10 @@ measurement file, inferred first) and writes into ``out_dir``:
 ``report.md`` and ``figures/*.png``
     The Markdown twin with its figures as files.
 ``summary.csv``
-    One row per wavelength: posterior mean, sd, median and 5/25/75/95 % quantiles of every
-    parameter, correlation of ``a`` with ``log tau``, point fit, ESS, R-hat, the posterior
-    predictive p-value of the model check, flags.
+    One row per wavelength (:mod:`bayespig.report.summary_table`, the same table as
+    ``bayespig infer``'s): posterior mean, sd, median, 50 % and 90 % central intervals of
+    every parameter, ESS, R-hat, correlation of ``a`` with ``log tau``, point fit, the
+    model check, flags.
 ``summary.json``
     The same numbers plus colour, fit quality and model check (the wavelengths the model
     cannot reproduce), predicted films, diagnostics and provenance.
@@ -24,9 +25,7 @@ place with :func:`os.replace` once all of them exist: an error leaves no half-wr
 
 from __future__ import annotations
 
-import csv
 import datetime as _dt
-import io
 import json
 import os
 import shutil
@@ -42,6 +41,7 @@ from .._json import jsonable as _jsonable
 from . import document as doc
 from . import figures as figs
 from . import quantities as q
+from . import summary_table
 
 __all__ = ["ReportResult", "load_posterior", "write_report"]
 
@@ -51,7 +51,8 @@ CORNER_WAVELENGTHS_NM = (450.0, 550.0, 650.0)
 MAX_COLOUR_DRAWS = 400
 #: Draws shown in corner plots and the ravine figure.
 MAX_PLOT_DRAWS = 4000
-_NETCDF_SUFFIXES = (".nc", ".nc4", ".netcdf", ".h5")
+#: File suffixes read as a posterior netCDF file (anything else is a measurement file).
+NETCDF_SUFFIXES = (".nc", ".nc4", ".netcdf", ".h5")
 
 
 @dataclass
@@ -107,7 +108,8 @@ def load_posterior(source, *, measurements=None, infer_kwargs=None, progress=Fal
         The measurements of a given posterior (for thickness, concentration, a synthetic
         truth and the pigment's name).
     infer_kwargs : dict, optional
-        Passed to :func:`bayespig.infer` when measurements are given.
+        Passed to :func:`bayespig.infer` when measurements are given; ``eps_given_as`` (not
+        passed on) names how the user gave ``eps`` for the report's text (default ``"eps="``).
     progress : bool
         Progress bars while inferring.
 
@@ -128,7 +130,7 @@ def load_posterior(source, *, measurements=None, infer_kwargs=None, progress=Fal
         path = Path(source)
         if not path.exists():
             raise ValueError(f"{path}: no such file")
-        if path.suffix.lower() in _NETCDF_SUFFIXES:
+        if path.suffix.lower() in NETCDF_SUFFIXES:
             try:
                 idata = _read_netcdf(path)
             except (OSError, ValueError, KeyError) as error:
@@ -141,7 +143,10 @@ def load_posterior(source, *, measurements=None, infer_kwargs=None, progress=Fal
         from ..inference import infer
 
         kwargs = {"progress": progress, **(infer_kwargs or {})}
-        return infer(source, **kwargs), source, True
+        given_as = kwargs.pop("eps_given_as", "eps=")
+        idata = infer(source, **kwargs)
+        q.record_eps_source(idata, q.eps_source(kwargs.get("eps"), source, given_as=given_as))
+        return idata, source, True
     raise ValueError("write_report needs an InferenceData, a netCDF posterior, a MeasurementSet "
                      f"or a measurement file; got {type(source).__name__}")
 
@@ -292,7 +297,7 @@ def write_report(posterior_or_measurements, out_dir, *, measurements=None,
                                             infer_kwargs=infer_kwargs, progress=progress)
     netcdf_source = None
     if isinstance(posterior_or_measurements, (str, os.PathLike)) and \
-            Path(posterior_or_measurements).suffix.lower() in _NETCDF_SUFFIXES:
+            Path(posterior_or_measurements).suffix.lower() in NETCDF_SUFFIXES:
         netcdf_source = Path(posterior_or_measurements)
     start = time.perf_counter()
     out_dir = Path(out_dir)
@@ -366,8 +371,8 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         substrate = "opaque" if f.opaque else f"r_s median {_fmt(float(np.median(f.r_s)))}"
         geometry = ", ".join(f.instrument.labels) if f.instrument else "specular transmittance"
         film_lines.append(f"{f.name} ({substrate}; {geometry})")
-    eps_text = ("eps inferred" if "eps" in bands
-                else f"eps known: {_fmt(float(np.nanmedian(q.eps_per_value(idata))))}")
+    eps_info = q.eps_origin(idata)
+    eps_text = eps_info["text"]
     blocks.append(doc.bullets([
         f"Source: {source or 'posterior given directly'}",
         "Samples: " + ", ".join(film_lines),
@@ -395,16 +400,34 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     check = q.posterior_predictive_check(idata, max_draws=max_colour_draws)
     value_rows = q.value_table(idata)
     misfit = _model_check_rows(wl, check, value_rows)
+    untestable = np.flatnonzero(~check["testable"])
+    untestable_text = ""
+    if untestable.size:
+        where = ("every wavelength" if untestable.size == wl.size else
+                 f"{untestable.size} of {wl.size} wavelengths ({', '.join(f'{wl[i]:g}' for i in untestable)} nm)")
+        untestable_text = (
+            f"The model check cannot test anything at {where}: there are no more measured values "
+            f"({int(check['n_values'][untestable[0]])}) than parameters "
+            f"({int(check['n_parameters'][untestable[0]])}), so some parameters reproduce any values "
+            "exactly and the check passes whatever the data"
+            + (", and eps cannot be inferred from them either (its posterior there is its prior)"
+               if "eps" in bands else "")
+            + ". Not testable (n values <= n parameters): measure more geometries, replicates or another "
+            "film to test the model.")
     if misfit:
         blocks.append(doc.paragraph(
-            f"**Model check: the model cannot reproduce the measurements at {len(misfit)} of {wl.size} "
-            f"wavelengths** ({', '.join(m['wavelength_nm_text'] for m in misfit)} nm; posterior predictive "
+            f"({', '.join(m['wavelength_nm_text'] for m in misfit)} nm; posterior predictive "
             f"p < {check['level']:g}). There the parameters are the best compromise of a model that does "
-            "not fit, not a measurement of the pigment - see Fit quality."))
+            "not fit, not a measurement of the pigment - see Fit quality." + (" " + untestable_text if untestable_text else ""),
+            lead=f"Model check: the model cannot reproduce the measurements at {len(misfit)} of {wl.size} "
+                 "wavelengths"))
+    elif untestable.size == wl.size:
+        blocks.append(doc.paragraph(untestable_text, lead="Model check: not testable."))
     else:
         blocks.append(doc.paragraph(
-            f"Model check: the model reproduces the measurements within their noise at every wavelength "
-            f"(posterior predictive p >= {check['level']:g})."))
+            "Model check: the model reproduces the measurements within their noise at every "
+            + ("testable " if untestable.size else "") + "wavelength "
+            f"(posterior predictive p >= {check['level']:g})." + (" " + untestable_text if untestable_text else "")))
     colour_slot = len(blocks)  # the colour verdict goes here once computed
 
     blocks.append(doc.heading("Optical properties"))
@@ -616,11 +639,19 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
                                "max_dE00_spread_measured": worst_measured,
                                "max_dE00_spread_all": max(spreads) if spreads else None,
                                "good_enough_for_colour_matching": verdict})
-        blocks.insert(colour_slot, doc.paragraph(
-            f"Colour: the posterior spread of the predicted colour of the measured samples is at most "
-            f"Delta E00 = {worst_measured:.2f} (95th percentile) - "
-            + ("good enough for colour matching (< 1)." if verdict else
-               "NOT good enough for colour matching (>= 1): measure more samples or geometries.")))
+        colour_summary["verdict_assumes_eps"] = eps_info["assumed"]
+        spread_text = (f"Colour: the posterior spread of the predicted colour of the measured samples is at most "
+                       f"Delta E00 = {worst_measured:.2f} (95th percentile) - ")
+        if eps_info["assumed"]:
+            spread_text += (
+                ("good enough for colour matching (< 1)" if verdict else "NOT good enough for colour matching (>= 1)")
+                + f" if eps really is {eps_info['value']:g}, which was only assumed ({eps_info['why']}). "
+                "The spread grows with eps: measure replicates to know your instrument's eps and pass --eps "
+                "before judging.")
+        else:
+            spread_text += ("good enough for colour matching (< 1)." if verdict else
+                            "NOT good enough for colour matching (>= 1): measure more samples or geometries.")
+        blocks.insert(colour_slot, doc.paragraph(spread_text))
 
     # ---- diagnostics and provenance
     _say(progress, "diagnostics")
@@ -655,7 +686,7 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         "colour": colour_summary, "priors": priors.describe(),
         "ravine_wavelength_nm": float(wl[r_index]), "provenance": prov,
     }
-    csv_text = _summary_csv(wl, bands, corr, point, diag, extinction, check["p_value"])
+    csv_text = summary_table.summary_csv(idata, measurements=measurements, check=check, diagnostics=diag)
     return {"blocks": blocks, "figures": pngs, "summary": _jsonable(summary), "csv": csv_text,
             "title": title}
 
@@ -674,31 +705,6 @@ def _model_check_rows(wl, check, value_rows):
                      "n_values": int(check["n_values"][i]), "sample": value_rows[k]["sample"],
                      "channel": value_rows[k]["channel"], "z": float(check["z"][i, k])})
     return rows
-
-
-def _summary_csv(wl, bands, corr, point, diag, extinction, ppc_p_value):
-    columns = {"wavelength_nm": wl}
-    for name, b in bands.items():
-        for stat in ("mean", "sd", "median", "q05", "q25", "q75", "q95"):
-            columns[f"{name}_{stat}"] = b[stat]
-    for name in ("k_ext", "sigma_ext"):
-        if name in extinction:
-            for stat in ("mean", "sd", "median", "q05", "q95"):
-                columns[f"{name}_{stat}"] = extinction[name][stat]
-    columns["corr_a_log_tau"] = corr
-    columns["point_a"] = point["a"]
-    columns["point_tau"] = point["tau"]
-    columns["ppc_p_value"] = ppc_p_value
-    for name in diag["ess"]:
-        columns[f"ess_bulk_{name}"] = diag["ess"][name]
-        columns[f"rhat_{name}"] = diag["rhat"][name]
-    flagged = {f["wavelength_nm"]: "; ".join(f["reasons"]) for f in diag["flags"]}
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(list(columns) + ["flags"])
-    for i, w in enumerate(wl):
-        writer.writerow([repr(float(columns[c][i])) for c in columns] + [flagged.get(float(w), "")])
-    return buffer.getvalue()
 
 
 def _write_files(out_dir, content, idata):
