@@ -66,7 +66,6 @@ def run_infer(args):
     from ..inference import ConvergenceWarning, InferenceSettings, diagnose, infer, save_inference
     from ..report.quantities import (
         card_factors,
-        eps_source,
         posterior_predictive_check,
         record_eps_source,
     )
@@ -92,7 +91,7 @@ def run_infer(args):
         flagged = diagnose(idata, warn=False)
     for warning in caught:
         print(f"bayespig: warning: {warning.message}", file=sys.stderr)
-    record_eps_source(idata, eps_source(eps, measurements, given_as="--eps"))
+    record_eps_source(idata, eps, measurements, given_as="--eps")
     check = posterior_predictive_check(idata)
     os.makedirs(args.out, exist_ok=True)
     posterior_path = os.path.join(args.out, "posterior.nc")

@@ -48,6 +48,9 @@ def add_report_parser(subparsers):
     parser.add_argument("--illuminant", default=DEFAULT_ILLUMINANT,
                         help=f"colour-science illuminant name (default {DEFAULT_ILLUMINANT!r})")
     parser.add_argument("--title", default=None, help="report title")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace the --out folder whole even when it is not an earlier report "
+                             "(without it, only an empty folder or an earlier bayespig report is replaced)")
     parser.add_argument("--no-progress", action="store_true", help="no progress output")
     parser.set_defaults(func=run_report)
     return parser
@@ -79,7 +82,8 @@ def run_report(args):
         warnings.simplefilter("always")
         result = write_report(source, args.out, measurements=args.measurements,
                               observer=args.observer, illuminant=args.illuminant, title=args.title,
-                              infer_kwargs=infer_kwargs, progress=not args.no_progress)
+                              infer_kwargs=infer_kwargs, progress=not args.no_progress,
+                              overwrite=args.overwrite)
     _print_warnings(caught)
     _print_result(result)
     return 0
@@ -88,6 +92,8 @@ def run_report(args):
 def _print_result(result):
     summary = result.summary
     flags = [f for f in summary["diagnostics"]["flags"] if f["wavelength_nm"] is not None]
+    if result.replaced:
+        print(f"replaced the earlier contents of {result.out_dir}")
     print(f"wrote {result.files['html']} and {result.files['markdown']} "
           f"({len(result.files['figures'])} figures), summary.csv, summary.json"
           + (", posterior.nc" if "netcdf" in result.files else "")
@@ -121,6 +127,8 @@ def add_demo_parser(subparsers):
     parser.add_argument("--seed", type=int, default=0, help="seed of the noise and the sampler (default 0)")
     parser.add_argument("--quick", action="store_true",
                         help="shorter runs at every second wavelength (for tests)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace the --out folder whole even when it is not an earlier report")
     parser.add_argument("--no-progress", action="store_true", help="no progress output")
     parser.set_defaults(func=run_demo)
     return parser
@@ -134,7 +142,8 @@ def run_demo(args):
         raise ValueError(f"--seed must be a non-negative integer, got {args.seed}")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = demo(args.out, seed=args.seed, progress=not args.no_progress, quick=args.quick)
+        result = demo(args.out, seed=args.seed, progress=not args.no_progress, quick=args.quick,
+                      overwrite=args.overwrite)
     _print_warnings(caught)
     _print_result(result)
     return 0

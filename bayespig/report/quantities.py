@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -55,6 +56,7 @@ __all__ = [
     "colour_spectrum",
     "default_unmeasured_films",
     "diagnostics",
+    "eps_of_run",
     "eps_origin",
     "eps_per_value",
     "eps_source",
@@ -420,7 +422,7 @@ DEFAULT_EPS = 0.05
 EPS_SOURCE_ATTR = "eps_source"
 
 
-def eps_source(eps, measurements, *, given_as="--eps"):
+def eps_source(eps, measurements, *, given_as="--eps", used=None):
     """Where the ``eps`` of a run of :func:`bayespig.infer` comes from.
 
     Mirrors ``infer``'s rule: a sample's own ``eps`` (a file column) first, then the ``eps``
@@ -433,6 +435,9 @@ def eps_source(eps, measurements, *, given_as="--eps"):
     measurements : MeasurementSet
     given_as : str
         How the user gave ``eps`` (``"--eps"`` on the command line, ``"eps="`` in Python).
+    used : float, optional
+        The eps the run actually used (:func:`eps_of_run`): the metadata ``eps`` counts as the
+        source only when it is this value.
 
     Returns
     -------
@@ -448,16 +453,40 @@ def eps_source(eps, measurements, *, given_as="--eps"):
     if eps is not None:
         return {"kind": "given", "as": given_as}
     metadata = getattr(measurements, "metadata", None) or {}
-    value = metadata.get("eps") if isinstance(metadata, dict) else None
-    if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
+    value = metadata.get("eps") if isinstance(metadata, Mapping) else None
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0 and \
+            (used is None or np.isclose(used, value)):
         return {"kind": "file"}
     return {"kind": "default"}
 
 
-def record_eps_source(idata, source):
-    """Store :func:`eps_source`'s answer in the posterior's attributes (JSON text)."""
+def eps_of_run(idata):
+    """The known eps a posterior was inferred with (median over its values), or None."""
+    if "eps" in idata.posterior:
+        return None
+    values = eps_per_value(idata)
+    values = values[np.isfinite(values)]
+    return float(np.median(values)) if values.size else None
+
+
+def record_eps_source(idata, eps, measurements, *, given_as="--eps"):
+    """Store where the posterior's eps came from (:func:`eps_source`) in its attributes (JSON text).
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+        From ``infer(measurements, eps=eps)``.
+    eps, measurements, given_as
+        As :func:`eps_source`.
+
+    Returns
+    -------
+    dict
+        The recorded source.
+    """
+    source = eps_source(eps, measurements, given_as=given_as, used=eps_of_run(idata))
     idata.posterior.attrs[EPS_SOURCE_ATTR] = json.dumps(source)
-    return idata
+    return source
 
 
 def eps_origin(idata):

@@ -19,8 +19,11 @@ measurement file, inferred first) and writes into ``out_dir``:
 ``posterior.nc``
     The posterior itself (netCDF), so the report's numbers can be recomputed.
 
-Every file is written into a temporary directory inside ``out_dir`` first and moved into
-place with :func:`os.replace` once all of them exist: an error leaves no half-written file.
+The whole report is written into a fresh hidden folder beside ``out_dir`` and swapped into
+place once every file exists, so ``out_dir`` holds one complete report -- never a mix with an
+earlier one (no stale figures) -- and an error or Ctrl-C leaves it as it was. An existing
+``out_dir`` is replaced only when it is empty or an earlier bayespig report
+(:func:`check_report_folder`); anything else needs ``overwrite=True`` (``--overwrite``).
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ import datetime as _dt
 import json
 import os
 import shutil
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,14 +40,15 @@ from pathlib import Path
 import numpy as np
 
 from .. import colorimetry
-from .._atomic import write_file_set
+from .._atomic import _umask
 from .._json import jsonable as _jsonable
 from . import document as doc
 from . import figures as figs
 from . import quantities as q
 from . import summary_table
 
-__all__ = ["ReportResult", "load_posterior", "write_report"]
+__all__ = ["NETCDF_SUFFIXES", "REPORT_FILES", "ReportResult", "check_report_folder", "load_posterior",
+           "write_report"]
 
 #: Wavelengths [nm] near which corner plots are drawn by default.
 CORNER_WAVELENGTHS_NM = (450.0, 550.0, 650.0)
@@ -51,6 +56,8 @@ CORNER_WAVELENGTHS_NM = (450.0, 550.0, 650.0)
 MAX_COLOUR_DRAWS = 400
 #: Draws shown in corner plots and the ravine figure.
 MAX_PLOT_DRAWS = 4000
+#: What a report folder holds (``summary.json`` lists the files of a report written since).
+REPORT_FILES = ("report.html", "report.md", "summary.csv", "summary.json", "posterior.nc", "figures")
 #: File suffixes read as a posterior netCDF file (anything else is a measurement file).
 NETCDF_SUFFIXES = (".nc", ".nc4", ".netcdf", ".h5")
 
@@ -69,6 +76,8 @@ class ReportResult:
         The content of ``summary.json``.
     seconds : float
         Time to compute and write the report (without inference) [s].
+    replaced : bool
+        Whether an earlier report (or, with ``overwrite``, another folder) was replaced.
     """
 
     out_dir: Path
@@ -76,6 +85,7 @@ class ReportResult:
     summary: dict
     seconds: float
     idata: object = field(default=None, repr=False)
+    replaced: bool = False
 
 
 # ------------------------------------------------------------------------------------------
@@ -145,7 +155,7 @@ def load_posterior(source, *, measurements=None, infer_kwargs=None, progress=Fal
         kwargs = {"progress": progress, **(infer_kwargs or {})}
         given_as = kwargs.pop("eps_given_as", "eps=")
         idata = infer(source, **kwargs)
-        q.record_eps_source(idata, q.eps_source(kwargs.get("eps"), source, given_as=given_as))
+        q.record_eps_source(idata, kwargs.get("eps"), source, given_as=given_as)
         return idata, source, True
     raise ValueError("write_report needs an InferenceData, a netCDF posterior, a MeasurementSet "
                      f"or a measurement file; got {type(source).__name__}")
@@ -244,7 +254,7 @@ def write_report(posterior_or_measurements, out_dir, *, measurements=None,
                  observer=colorimetry.DEFAULT_OBSERVER, illuminant=colorimetry.DEFAULT_ILLUMINANT,
                  title=None, corner_wavelengths=CORNER_WAVELENGTHS_NM, ravine_wavelength=None,
                  films=None, max_colour_draws=MAX_COLOUR_DRAWS, infer_kwargs=None,
-                 progress=False, save_posterior=True):
+                 progress=False, save_posterior=True, overwrite=False, extra_files=None):
     """Write the uncertainty report of one pigment.
 
     Parameters
@@ -253,7 +263,9 @@ def write_report(posterior_or_measurements, out_dir, *, measurements=None,
         A posterior from :func:`bayespig.infer` (or its netCDF file), or measurements
         (a set or a file), which are inferred first with :func:`bayespig.infer`.
     out_dir : str or os.PathLike
-        Directory to write into (created if missing; files of an earlier report are replaced).
+        Folder of the report: created if missing, replaced whole if it is empty or holds an
+        earlier bayespig report; any other existing folder is refused (checked before any work)
+        unless ``overwrite``.
     measurements : MeasurementSet, str or os.PathLike, optional
         The measurements of a given posterior: film thickness and concentration (for the
         extinction cross-section, appendix A2), a synthetic truth, the name of the source.
@@ -277,6 +289,11 @@ def write_report(posterior_or_measurements, out_dir, *, measurements=None,
         Show progress while inferring and writing.
     save_posterior : bool
         Also write ``posterior.nc``.
+    overwrite : bool
+        Replace ``out_dir`` whole even when it is not a bayespig report.
+    extra_files : dict, optional
+        Further files of the report folder: relative path -> bytes, str or a callable that
+        writes the file at the path it is given (e.g. ``{"measurements.csv": ms.to_csv}``).
 
     Returns
     -------
@@ -285,8 +302,11 @@ def write_report(posterior_or_measurements, out_dir, *, measurements=None,
     Raises
     ------
     ValueError
-        For inputs that are not a posterior or measurements, or bad colorimetric names.
+        For inputs that are not a posterior or measurements, bad colorimetric names, or an
+        ``out_dir`` that may not be replaced (:func:`check_report_folder`).
     """
+    out_dir = Path(out_dir)
+    replacing = check_report_folder(out_dir, overwrite=overwrite)
     if observer not in colorimetry.OBSERVERS:
         raise ValueError(f"observer={observer!r} is not known to colour-science; valid names: "
                          + ", ".join(colorimetry.OBSERVERS))
@@ -300,14 +320,14 @@ def write_report(posterior_or_measurements, out_dir, *, measurements=None,
             Path(posterior_or_measurements).suffix.lower() in NETCDF_SUFFIXES:
         netcdf_source = Path(posterior_or_measurements)
     start = time.perf_counter()
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     content = _build(idata, measurements, observer=observer, illuminant=illuminant, title=title,
                      corner_wavelengths=corner_wavelengths, ravine_wavelength=ravine_wavelength,
                      films=films, max_colour_draws=max_colour_draws, progress=progress)
-    files = _write_files(out_dir, content, (netcdf_source or idata) if save_posterior else None)
+    check_report_folder(out_dir, overwrite=overwrite)  # still so after the inference
+    files = _write_files(out_dir, content, (netcdf_source or idata) if save_posterior else None,
+                         extra_files or {})
     seconds = time.perf_counter() - start
-    return ReportResult(out_dir, files, content["summary"], seconds, idata)
+    return ReportResult(out_dir, files, content["summary"], seconds, idata, replacing)
 
 
 def _say(progress, message):
@@ -707,23 +727,136 @@ def _model_check_rows(wl, check, value_rows):
     return rows
 
 
-def _write_files(out_dir, content, idata):
-    """Write everything into a temporary directory in ``out_dir``, then move it into place."""
-    # figures first, the pages that link them last
+def _write_files(out_dir, content, idata, extra_files):
+    """Write the whole report into a fresh folder beside ``out_dir``, then swap it into place."""
     contents = {f"figures/{name}.png": png for name, png in content["figures"].items()}
     if idata is not None:
         contents["posterior.nc"] = lambda path: _save_netcdf(idata, path)
+    contents.update(extra_files)
     contents["summary.csv"] = content["csv"]
-    contents["summary.json"] = json.dumps(content["summary"], indent=1, allow_nan=False, default=str) + "\n"
+    summary = dict(content["summary"])
+    summary["files"] = sorted(set(contents) | {"summary.json", "report.md", "report.html"})
+    contents["summary.json"] = json.dumps(summary, indent=1, allow_nan=False, default=str) + "\n"
     contents["report.md"] = doc.to_markdown(content["blocks"])
     contents["report.html"] = doc.to_html(content["blocks"], content["figures"], content["title"])
-    written = write_file_set(out_dir, contents)
-    files = {"figures": [written[f"figures/{name}.png"] for name in content["figures"]]}
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))
+    try:
+        for relative, value in contents.items():
+            target = staging / relative
+            target.parent.mkdir(parents=True, exist_ok=True)
+            if callable(value):
+                value(target)
+            elif isinstance(value, bytes):
+                target.write_bytes(value)
+            else:
+                target.write_text(value, encoding="utf-8")
+        for folder in [staging, *(p for p in staging.rglob("*") if p.is_dir())]:
+            os.chmod(folder, 0o777 & ~_umask())
+        _swap_into_place(staging, out_dir)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    content["summary"]["files"] = summary["files"]
+    files = {"figures": [out_dir / f"figures/{name}.png" for name in content["figures"]]}
     for role, name in (("netcdf", "posterior.nc"), ("csv", "summary.csv"), ("json", "summary.json"),
                        ("markdown", "report.md"), ("html", "report.html")):
-        if name in written:
-            files[role] = written[name]
+        if name in contents:
+            files[role] = out_dir / name
     return files
+
+
+def _swap_into_place(staging, out_dir):
+    """Move the complete folder ``staging`` to ``out_dir``, replacing what is there whole.
+
+    Two renames in the same parent folder; if the second fails the old folder is put back.
+    """
+    if not (out_dir.exists() or out_dir.is_symlink()):
+        os.rename(staging, out_dir)
+        return
+    old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".old", dir=out_dir.parent))
+    os.rmdir(old)
+    os.rename(out_dir, old)
+    try:
+        os.rename(staging, out_dir)
+    except BaseException:
+        os.rename(old, out_dir)
+        raise
+    if old.is_symlink() or not old.is_dir():
+        old.unlink()
+    else:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _is_report_folder(folder, entries):
+    """Whether ``folder`` holds an earlier bayespig report and nothing else."""
+    try:
+        summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    if not isinstance(summary, dict) or "provenance" not in summary or not (folder / "report.html").is_file():
+        return False
+    listed = summary.get("files")
+    known = ({str(Path(f).parts[0]) for f in listed if isinstance(f, str) and f}
+             if isinstance(listed, list) else set(REPORT_FILES) | {"measurements.csv"})
+    return all(entry.name in known for entry in entries)
+
+
+def check_report_folder(out_dir, *, overwrite=False):
+    """Check, before any work, that a report may be written to ``out_dir``.
+
+    A missing folder (its parents are created), an empty one and an earlier bayespig report
+    (``summary.json`` and ``report.html`` and nothing the report did not write) may be
+    replaced; any other existing folder only with ``overwrite``.
+
+    Parameters
+    ----------
+    out_dir : str or os.PathLike
+    overwrite : bool
+
+    Returns
+    -------
+    bool
+        Whether something that exists will be replaced.
+
+    Raises
+    ------
+    ValueError
+        Naming the folder and what to do, e.g. ``run: the folder exists and is not a bayespig
+        report (it holds posterior.nc, summary.csv); write the report into a new folder (e.g.
+        --out run/report) or pass --overwrite to replace the whole folder``.
+    """
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ValueError(f"{out_dir}: exists and is not a folder; choose another output folder")
+    if out_dir.is_dir():
+        try:
+            entries = sorted(out_dir.iterdir())
+        except OSError as error:
+            raise ValueError(f"{out_dir}: cannot read the folder ({error.strerror})") from None
+        if Path.cwd().resolve().is_relative_to(out_dir.resolve()):
+            raise ValueError(f"{out_dir}: is the current folder (or holds it), which cannot be replaced; "
+                             "choose another output folder")
+        if entries and not overwrite and not _is_report_folder(out_dir, entries):
+            names = [e.name + ("/" if e.is_dir() else "") for e in entries]
+            shown = ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
+            raise ValueError(f"{out_dir}: the folder exists and is not a bayespig report (it holds {shown}); "
+                             f"write the report into a new folder (e.g. --out {out_dir / 'report'}) or pass "
+                             "--overwrite to replace the whole folder")
+        existing = bool(entries)
+    else:
+        existing = False
+    parent = out_dir.absolute().parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise ValueError(f"{out_dir}: {parent} is not a folder; choose another output folder")
+    try:  # the report's staging folder goes beside out_dir: try one there
+        os.rmdir(tempfile.mkdtemp(prefix=".bayespig-check.", dir=parent))
+    except OSError as error:
+        raise ValueError(f"{out_dir}: cannot write into {parent} ({error.strerror or error}); "
+                         "choose another output folder") from None
+    return existing
 
 
 def _save_netcdf(idata, path):
