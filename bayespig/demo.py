@@ -122,6 +122,7 @@ def run_demo(out_dir=DEFAULT_OUT_DIR, *, seed=0, progress=True, quick=False, exe
     """
     from .inference import InferenceSettings, infer
     from .report import write_report
+    from .report.quantities import record_eps_source
     from .report.write import check_report_folder
 
     if not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -144,6 +145,7 @@ def run_demo(out_dir=DEFAULT_OUT_DIR, *, seed=0, progress=True, quick=False, exe
     idata = infer(measurements, method="method4", seed=seed, progress=progress, settings=settings,
                   executor=executor)
     timings["infer"] = time.perf_counter() - start
+    record_eps_source(idata, None, measurements, given_as="eps=")
     say(f"  writing the report into {out_dir}")
     start = time.perf_counter()
     result = write_report(idata, out_dir, measurements=measurements, progress=progress, overwrite=overwrite,

@@ -63,6 +63,7 @@ __all__ = [
     "extinction",
     "film_colour",
     "measured_colour",
+    "measurement_kind",
     "model_check_status",
     "parameter_bands",
     "parameters_per_wavelength",
@@ -220,6 +221,14 @@ def value_table(idata):
         values = _value_coord(idata, name)
         columns[name] = values if values is not None else [""] * n_values
     return [{name: columns[name][k] for name in columns} for k in range(n_values)]
+
+
+def measurement_kind(row):
+    """What a measured value is: ``"brdf"`` [1/sr], ``"hemispherical"``, ``"reflectance_factor"``
+    or ``"transmittance"`` (fractions), from its row of :func:`value_table`."""
+    if _is_transmittance(row):
+        return "transmittance"
+    return _channel_of(row["channel"], row["kind"]).kind
 
 
 def _is_transmittance(row):
@@ -489,8 +498,15 @@ def record_eps_source(idata, eps, measurements, *, given_as="--eps"):
     return source
 
 
-def eps_origin(idata):
+def eps_origin(idata, measurements=None):
     """The report's words for the posterior's ``eps`` and where it came from.
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+    measurements : MeasurementSet, optional
+        When the posterior does not record its eps source: a metadata ``eps`` of these
+        measurements equal to the posterior's eps counts as its source.
 
     Returns
     -------
@@ -505,6 +521,9 @@ def eps_origin(idata):
         return {"kind": "inferred", "value": None, "assumed": False, "why": "",
                 "text": "eps inferred (a parameter per wavelength)"}
     recorded = _json_attr(_attrs(idata).get(EPS_SOURCE_ATTR))
+    if not isinstance(recorded, dict) and measurements is not None:
+        guess = eps_source(None, measurements, used=eps_of_run(idata))
+        recorded = guess if guess["kind"] == "file" else None
     kind = recorded.get("kind", "unknown") if isinstance(recorded, dict) else "unknown"
     values = eps_per_value(idata)
     finite = values[np.isfinite(values)]

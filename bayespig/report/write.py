@@ -385,18 +385,19 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     blocks.append(doc.paragraph(intro))
     if synthetic:
         blocks.append(doc.paragraph(f"SYNTHETIC DATA - {synthetic}: the measurements were simulated; "
-                                    "dashed lines and crosses mark the true values."))
+                                    "red lines and stars mark the true values."))
     film_lines = []
     for f in problem.films:
         substrate = "opaque" if f.opaque else f"r_s median {_fmt(float(np.median(f.r_s)))}"
         geometry = ", ".join(f.instrument.labels) if f.instrument else "specular transmittance"
         film_lines.append(f"{f.name} ({substrate}; {geometry})")
-    eps_info = q.eps_origin(idata)
+    eps_info = q.eps_origin(idata, measurements)
     eps_text = eps_info["text"]
     blocks.append(doc.bullets([
         f"Source: {source or 'posterior given directly'}",
         "Samples: " + ", ".join(film_lines),
         f"Noise model: x_obs = x_model (1 + eps xi), paper eq. 7; {eps_text}",
+        f"Phase function: {_phase_text(idata, prov)}",
         f"Chains x draws: {diag['n_chains']} x {diag['n_draws']}; seed {prov.get('seed', 'n/a')}",
     ]))
 
@@ -466,7 +467,7 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     add_figure("parameters", figs.parameter_figure(wl, panels),
                "Posterior median (line) with 50 % and 90 % central intervals (bands); + point fit"
                + (" (at g = 0, the start of the sampler)" if "g" in bands else "")
-               + ("; dashed: truth of the synthetic pigment" if truth else "") + ". tau is the optical "
+               + ("; red line with stars: truth of the synthetic pigment" if truth else "") + ". tau is the optical "
                f"thickness of film group '{groups[0] if groups else 'n/a'}'.")
     factors = q.card_factors(idata)
     if factors:
@@ -506,7 +507,8 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     blocks.append(doc.paragraph(
         "Corner plots show the joint posterior at single wavelengths: a long, tilted cloud means "
         "the data constrain a combination of parameters better than each one - the paper's "
-        "'ravine'. Blue lines: point fit (least squares, the paper's procedure); contours at "
+        "'ravine'. Blue lines: point fit (least squares, the paper's procedure); black dashes: the 5 %, "
+        "50 % and 95 % quantiles; red lines and star: the truth of a synthetic pigment; contours at "
         "50 % and 90 %; titles give the median and the 5 %/95 % quantiles."))
     a_plot = q.posterior_draws(idata, "a", MAX_PLOT_DRAWS)
     tau_plot = q.posterior_draws(idata, "tau", MAX_PLOT_DRAWS)
@@ -530,7 +532,7 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
                 tr[labels.index("g")] = float(truth["g"])
         add_figure(f"corner_{wl[i]:g}nm",
                    figs.corner_figure(samples, labels, point=pt, truth=tr, title=f"{wl[i]:g} nm"),
-                   f"Joint posterior at {wl[i]:g} nm" + (" (dashed black: truth)" if tr else "") + ".")
+                   f"Joint posterior at {wl[i]:g} nm" + (" (red: truth)" if tr else "") + ".")
 
     sd_log_tau = np.log(tau).std(axis=0)
     r_index = (int(np.argmax(sd_log_tau)) if ravine_wavelength is None
@@ -562,7 +564,8 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     blocks.append(doc.heading("Fit quality"))
     residuals = q.residuals_in_eps(idata, max_draws=max_colour_draws)
     samples_measured = list(dict.fromkeys(r["sample"] for r in residuals["rows"]))
-    add_figure("fit", figs.fit_figure(wl, residuals, samples_measured),
+    add_figure("fit", figs.fit_figure(wl, residuals, samples_measured,
+                                      [q.measurement_kind(r) for r in residuals["rows"]]),
                "Measured values (dots) and the posterior predictive (noise-free model) mean and 90 % "
                "band (lines), per sample and geometry.")
     add_figure("residuals", figs.residual_figure(wl, residuals, samples_measured),
@@ -709,6 +712,20 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     csv_text = summary_table.summary_csv(idata, measurements=measurements, check=check, diagnostics=diag)
     return {"blocks": blocks, "figures": pngs, "summary": _jsonable(summary), "csv": csv_text,
             "title": title}
+
+
+def _phase_text(idata, prov):
+    """How the report's posterior treats the Henyey-Greenstein ``g``, in words."""
+    if "g" in idata.posterior:
+        return "Henyey-Greenstein g is a parameter at every wavelength (inferred, see below)"
+    g = prov.get("g", "isotropic")
+    if g in (None, "isotropic", 0, 0.0):
+        return ("g = 0 fixed (isotropic scattering; not inferred - bayespig infer --g free makes it a "
+                "parameter)")
+    try:
+        return f"Henyey-Greenstein g = {float(g):g} fixed (not inferred)"
+    except (TypeError, ValueError):
+        return f"g: {g}"
 
 
 def _lab(lab):
