@@ -40,6 +40,10 @@ def test_report_from_the_demo_posterior_with_other_colour_conditions(demo_dir, t
     lab_a = summary["colour"]["measured"][0]["Lab_measured"]
     lab_d65 = default["colour"]["measured"][0]["Lab_measured"]
     assert np.abs(np.subtract(lab_a, lab_d65)).max() > 0.5
+    assert "replaced" not in printed
+    # the same command again: the earlier report is replaced, and it says so
+    assert args.func(args) == 0
+    assert capsys.readouterr().out.startswith(f"replaced the earlier contents of {out}\n")
 
 
 def test_report_of_a_missing_file_is_a_clear_error(tmp_path):
