@@ -7,7 +7,6 @@ import re
 import numpy as np
 import pytest
 
-from bayespig.commands import report as report_command
 from bayespig.commands.report import add_report_parser
 from bayespig.demo import demo_measurements
 from bayespig.report import quantities as q
@@ -29,7 +28,7 @@ def _csv_without_eps(path, names=("on_black", "on_white")):
     lines = [line for line in path.read_text().splitlines() if not line.startswith("# eps:")]
     text = "\n".join(lines) + "\n"
     for old, new in zip(("on_black", "on_white"), names):
-        text = re.sub(rf"^{old},", f"{new},", text, flags=re.M)
+        text = re.sub(rf"^{old},", f"{new},", text, flags=re.MULTILINE)
     path.write_text(text)
     return path
 
@@ -108,8 +107,8 @@ def test_eps_source_follows_infers_rule(demo_set):
     ({"kind": "default"}, "eps assumed: 0.05 (the default; pass --eps)", True),
     ({"kind": "given", "as": "--eps"}, "eps given: 0.05 (--eps)", False),
     ({"kind": "file"}, "eps given: 0.05 (the measurement file)", False),
-    (None, "eps known: 0.05 (where it came from is not recorded in the posterior; it equals the "
-           "default, so it may only be assumed)", True),
+    (None, ("eps known: 0.05 (where it came from is not recorded in the posterior; it equals the "
+            "default, so it may only be assumed)"), True),
 ])
 def test_eps_origin_words(demo_idata, source, text, assumed):
     idata = demo_idata.copy()
