@@ -110,7 +110,7 @@ def run_infer(args):
               f"{factor['high']:.3f}] (90 %; prior sd {factor['relative_sd']:g} in log f)")
     print(f"wrote {posterior_path} and {summary_path}")
     sys.stdout.flush()
-    untestable = np.flatnonzero(~check["testable"])
+    untestable = np.flatnonzero(~check["testable"] & ~check["flagged"])
     if untestable.size:
         wl = idata.posterior["wavelength"].values
         print(f"bayespig: note: the model check cannot test anything at {untestable.size} wavelength(s) "

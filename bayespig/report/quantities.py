@@ -614,9 +614,11 @@ def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
     posterior instead.
 
     A wavelength with no more measured values than parameters (an 8°/d film on black and
-    white: 2 values for ``a`` and ``tau``) cannot be tested: some parameters reproduce any
-    values there, so ``p`` says nothing. Such wavelengths are ``testable = False``, never
-    flagged, and :func:`model_check_status` calls them "not testable".
+    white: 2 values for ``a`` and ``tau``) cannot test the model: some parameters reproduce
+    exactly any values the model can produce, so a large ``p`` says nothing there
+    (``testable = False``; :func:`model_check_status` calls it "not testable", not "pass").
+    A small ``p`` still flags values that no parameters in the prior's support can produce
+    (e.g. a film on white darker than on black).
 
     Parameters
     ----------
@@ -673,7 +675,7 @@ def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
     worst = np.argmax(np.where(measured, np.abs(np.nan_to_num(z, nan=np.inf)), -1.0), axis=-1)
     n_parameters = np.full(n_values.shape, parameters_per_wavelength(idata))
     testable = n_values > n_parameters
-    return {"p_value": p_value, "chi2": chi2, "n_values": n_values, "flagged": testable & (p_value < level),
+    return {"p_value": p_value, "chi2": chi2, "n_values": n_values, "flagged": p_value < level,
             "worst": worst, "z": z, "level": float(level), "n_parameters": n_parameters,
             "testable": testable}
 
@@ -716,10 +718,10 @@ def model_check_status(check):
     """
     out = []
     for i in range(len(check["p_value"])):
-        if not check["testable"][i]:
-            out.append(f"not testable ({check['n_values'][i]} values <= {check['n_parameters'][i]} parameters)")
-        elif check["flagged"][i]:
+        if check["flagged"][i]:
             out.append(f"misfit (p < {check['level']:g})")
+        elif not check["testable"][i]:
+            out.append(f"not testable ({check['n_values'][i]} values <= {check['n_parameters'][i]} parameters)")
         else:
             out.append("pass")
     return out

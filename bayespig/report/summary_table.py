@@ -22,8 +22,8 @@ inferred):
     ``tau / H`` [1/µm] and cross-section ``tau / (H D)`` (mean, sd, median, ci90 low/high).
 ``ppc_p_value``, ``model_check``
     The posterior predictive check (:func:`~bayespig.report.quantities.posterior_predictive_check`):
-    its p-value (empty where the check cannot test anything) and its verdict: ``pass``,
-    ``misfit (p < 0.01)`` or ``not testable (2 values <= 2 parameters)``.
+    its p-value and its verdict: ``pass``, ``misfit (p < 0.01)`` or, where a wavelength has no
+    more values than parameters and nothing is flagged, ``not testable (2 values <= 2 parameters)``.
 ``flags``
     Convergence and identification problems of the wavelength, ``; ``-separated (empty: none).
 
@@ -124,7 +124,7 @@ def summary_columns(idata, *, measurements=None, check=None, diagnostics=None):
                                     else np.full(wl.size, np.nan))
     columns.update(_extinction_columns(idata, measurements))
     check = check if check is not None else q.posterior_predictive_check(idata)
-    columns["ppc_p_value"] = np.where(check["testable"], check["p_value"], np.nan)
+    columns["ppc_p_value"] = check["p_value"]
     columns["model_check"] = q.model_check_status(check)
     diagnostics = diagnostics if diagnostics is not None else q.diagnostics(idata)
     flagged = {f["wavelength_nm"]: "; ".join(f["reasons"]) for f in diagnostics["flags"]

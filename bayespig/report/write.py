@@ -418,10 +418,10 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         f"Diagnostics: {len(flagged)} of {wl.size} wavelengths flagged"
         + (" (see Diagnostics below)." if flagged else " - every wavelength converged "
            f"(R-hat <= {diag['rhat_max']:g}, bulk ESS >= {diag['ess_min']:g}).")))
-    check = q.posterior_predictive_check(idata, max_draws=max_colour_draws)
+    check = q.posterior_predictive_check(idata)  # every draw: the p of summary.csv, as infer writes it
     value_rows = q.value_table(idata)
     misfit = _model_check_rows(wl, check, value_rows)
-    untestable = np.flatnonzero(~check["testable"])
+    untestable = np.flatnonzero(~check["testable"] & ~check["flagged"])
     untestable_text = ""
     if untestable.size:
         where = ("every wavelength" if untestable.size == wl.size else
@@ -429,9 +429,9 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         untestable_text = (
             f"The model check cannot test anything at {where}: there are no more measured values "
             f"({int(check['n_values'][untestable[0]])}) than parameters "
-            f"({int(check['n_parameters'][untestable[0]])}), so some parameters reproduce any values "
-            "exactly and the check passes whatever the data"
-            + (", and eps cannot be inferred from them either (its posterior there is its prior)"
+            f"({int(check['n_parameters'][untestable[0]])}), so some parameters reproduce exactly any values "
+            "the model can produce, and the check passes whatever the model misses"
+            + ("; eps cannot be inferred from them either (its posterior there is its prior)"
                if "eps" in bands else "")
             + ". Not testable (n values <= n parameters): measure more geometries, replicates or another "
             "film to test the model.")
