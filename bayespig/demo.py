@@ -94,7 +94,8 @@ def demo_measurements(*, seed=0, wavelength_nm=DEMO_WAVELENGTHS_NM, instrument="
                           source="bayespig demo (synthetic)")
 
 
-def run_demo(out_dir=DEFAULT_OUT_DIR, *, seed=0, progress=True, quick=False, executor=None):
+def run_demo(out_dir=DEFAULT_OUT_DIR, *, seed=0, progress=True, quick=False, executor=None,
+             overwrite=False):
     """Simulate the synthetic pigment, infer its posterior and write the report.
 
     Parameters
@@ -110,6 +111,9 @@ def run_demo(out_dir=DEFAULT_OUT_DIR, *, seed=0, progress=True, quick=False, exe
         tests; the title says so, and the diagnostics flag the low effective sample sizes.
     executor : concurrent.futures.Executor, optional
         Passed to :func:`bayespig.infer`.
+    overwrite : bool
+        Replace ``out_dir`` even when it is not an earlier report (as
+        :func:`bayespig.report.write_report`; checked before any work).
 
     Returns
     -------
@@ -118,10 +122,13 @@ def run_demo(out_dir=DEFAULT_OUT_DIR, *, seed=0, progress=True, quick=False, exe
     """
     from .inference import InferenceSettings, infer
     from .report import write_report
+    from .report.quantities import record_eps_source
+    from .report.write import check_report_folder
 
     if not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     out_dir = Path(out_dir)
+    check_report_folder(out_dir, overwrite=overwrite)
     say = print if progress else (lambda *a, **k: None)
     wavelength_nm = DEMO_WAVELENGTHS_NM[::3] if quick else DEMO_WAVELENGTHS_NM
     settings = QUICK_SETTINGS if quick else None
@@ -130,8 +137,6 @@ def run_demo(out_dir=DEFAULT_OUT_DIR, *, seed=0, progress=True, quick=False, exe
     say(f"bayespig demo: {SYNTHETIC_PIGMENT['name']}")
     say(f"  simulating method-4 films (black and white substrates), multi-angle-45, eps 0.05, seed {seed}")
     measurements = demo_measurements(seed=seed, wavelength_nm=wavelength_nm)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    measurements.to_csv(out_dir / "measurements.csv")
     timings["simulate"] = time.perf_counter() - start
     say(f"  inferring the posterior at {wavelength_nm.size} wavelengths"
         + (" (quick settings)" if quick else ""))
@@ -140,9 +145,11 @@ def run_demo(out_dir=DEFAULT_OUT_DIR, *, seed=0, progress=True, quick=False, exe
     idata = infer(measurements, method="method4", seed=seed, progress=progress, settings=settings,
                   executor=executor)
     timings["infer"] = time.perf_counter() - start
+    record_eps_source(idata, None, measurements, given_as="eps=")
     say(f"  writing the report into {out_dir}")
     start = time.perf_counter()
-    result = write_report(idata, out_dir, measurements=measurements, progress=progress,
+    result = write_report(idata, out_dir, measurements=measurements, progress=progress, overwrite=overwrite,
+                          extra_files={"measurements.csv": measurements.to_csv},
                           title="bayespig demo: " + SYNTHETIC_PIGMENT["name"] + (" [quick]" if quick else ""))
     timings["report"] = time.perf_counter() - start
     result.summary["timings_s"] = timings

@@ -21,7 +21,7 @@ from ._arguments import (
     read_film,
 )
 
-__all__ = ["add_infer_parser", "run_infer"]
+__all__ = ["add_infer_parser", "eps_argument", "run_infer"]
 
 
 
@@ -60,7 +60,8 @@ def add_infer_parser(subparsers):
     return parser
 
 
-def _eps_argument(text):
+def eps_argument(text):
+    """``--eps`` text -> a positive number, ``"infer"`` or None (not given)."""
     if text is None or text == "infer":
         return text
     try:
@@ -74,49 +75,60 @@ def _eps_argument(text):
 
 def run_infer(args):
     """Run ``bayespig infer``; returns the exit status (flagged wavelengths are printed to stderr)."""
-    from ..inference import (
-        ConvergenceWarning,
-        InferenceSettings,
-        diagnose,
-        infer,
-        save_inference,
-        summarize,
+    from ..inference import ConvergenceWarning, InferenceSettings, diagnose, infer, save_inference
+    from ..report.quantities import (
+        card_factors,
+        posterior_predictive_check,
+        record_eps_source,
     )
-    from ..report.quantities import card_factors, posterior_predictive_check
+    from ..report.summary_table import columns_to_csv, summary_columns
 
-    eps = _eps_argument(args.eps)
+    eps = eps_argument(args.eps)
     overrides = {name: value for name, value in (("n_walkers", args.walkers),
                                                  ("n_ensembles", args.ensembles),
                                                  ("max_steps", args.max_steps)) if value is not None}
     settings = InferenceSettings(**overrides)
     if not os.path.exists(args.measurements):
         raise ValueError(f"{args.measurements}: no such file")
+    measurements = read_film(args.measurements, args.film)
+    if isinstance(measurements, (str, os.PathLike)):
+        from ..data import read_measurements
+
+        measurements = read_measurements(measurements)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ConvergenceWarning)
-        idata = infer(read_film(args.measurements, args.film), method=_METHODS[args.method], seed=args.seed,
+        idata = infer(measurements, method=_METHODS[args.method], seed=args.seed,
                       g=args.g, eps=eps, progress=not args.no_progress, settings=settings,
                       substrate_sd=args.substrate_sd)
         flagged = diagnose(idata, warn=False)
     for warning in caught:
         print(f"bayespig: warning: {warning.message}", file=sys.stderr)
-    summary = summarize(idata)
+    record_eps_source(idata, eps, measurements, given_as="--eps")
+    check = posterior_predictive_check(idata)
     os.makedirs(args.out, exist_ok=True)
     posterior_path = os.path.join(args.out, "posterior.nc")
     summary_path = os.path.join(args.out, "summary.csv")
     save_inference(idata, posterior_path)
+    summary = summary_columns(idata, measurements=measurements, check=check)
     with atomic_path(summary_path, suffix=".csv") as temporary:
-        summary.to_csv(temporary, float_format="%.6g")
+        temporary.write_text(columns_to_csv(summary), encoding="utf-8")
     columns = [c for c in ("a_mean", "a_sd", "tau_mean", "tau_sd", "corr_a_log_tau", "a_r_hat",
                            "tau_r_hat", "a_ess_bulk", "tau_ess_bulk") if c in summary]
     print(f"bayespig infer: {idata.posterior.attrs['method']}, g {args.g}, "
           f"eps {idata.posterior.attrs['eps_mode']}, seed {args.seed}")
-    print(summary[columns].to_string(float_format=lambda v: f"{v:.4g}"))
+    print(_table(summary, columns))
     for factor in card_factors(idata):
         print(f"card {factor['card']}: r_s factor {factor['median']:.3f} [{factor['low']:.3f}, "
               f"{factor['high']:.3f}] (90 %; prior sd {factor['relative_sd']:g} in log f)")
     print(f"wrote {posterior_path} and {summary_path}")
     sys.stdout.flush()
-    check = posterior_predictive_check(idata)
+    untestable = np.flatnonzero(~check["testable"] & ~check["flagged"])
+    if untestable.size:
+        wl = idata.posterior["wavelength"].values
+        print(f"bayespig: note: the model check cannot test anything at {untestable.size} wavelength(s) "
+              f"({', '.join(f'{wl[i]:g}' for i in untestable)} nm): not more measured values than "
+              f"parameters ({int(check['n_values'][untestable[0]])} <= {int(check['n_parameters'][untestable[0]])})",
+              file=sys.stderr)
     misfit = np.flatnonzero(check["flagged"])
     if misfit.size:
         wl = idata.posterior["wavelength"].values
@@ -129,3 +141,11 @@ def run_infer(args):
         for line in flagged:
             print(f"  {line}", file=sys.stderr)
     return 0
+
+
+def _table(columns, names):
+    """The chosen summary columns as an aligned text table, one row per wavelength."""
+    header = ["wavelength_nm"] + names
+    rows = [[f"{w:g}"] + [f"{columns[n][i]:.4g}" for n in names] for i, w in enumerate(columns["wavelength_nm"])]
+    widths = [max(len(r[k]) for r in rows + [header]) for k in range(len(header))]
+    return "\n".join("  ".join(cell.rjust(width) for cell, width in zip(row, widths)) for row in [header] + rows)

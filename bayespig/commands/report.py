@@ -5,10 +5,12 @@ from __future__ import annotations
 import os
 import sys
 import warnings
+from pathlib import Path
 
 from ._arguments import INFER_METHODS as _METHODS
 from ._arguments import METHOD_HELP, add_input_argument, add_output_argument, add_verbosity_arguments, method_argument
 from ._arguments import add_film_argument, add_substrate_argument, read_film
+from .infer import eps_argument
 
 __all__ = ["add_demo_parser", "add_report_parser", "run_demo", "run_report"]
 
@@ -39,11 +41,18 @@ def add_report_parser(subparsers):
     parser.add_argument("--seed", type=int, default=0, help="when inferring: random seed (default 0)")
     parser.add_argument("--g", default="isotropic", choices=("isotropic", "free"),
                         help="when inferring: g fixed at 0 (default) or a parameter")
+    parser.add_argument("--eps", default=None,
+                        help="when inferring: relative measurement error of eq. (7), a number (e.g. "
+                             "0.02 for 2 %%) or 'infer' (default: the file's eps, else 0.05 - an "
+                             "assumption the report says; see the user guide for typical values)")
     parser.add_argument("--observer", default=DEFAULT_OBSERVER,
                         help=f"colour-science observer name (default {DEFAULT_OBSERVER!r})")
     parser.add_argument("--illuminant", default=DEFAULT_ILLUMINANT,
                         help=f"colour-science illuminant name (default {DEFAULT_ILLUMINANT!r})")
     parser.add_argument("--title", default=None, help="report title")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace the --out folder whole even when it is not an earlier report "
+                             "(without it, only an empty folder or an earlier bayespig report is replaced)")
     parser.add_argument("--no-progress", action="store_true", help="no progress output")
     add_verbosity_arguments(parser, no_progress_alias=False)
     parser.set_defaults(func=run_report)
@@ -61,17 +70,23 @@ def _print_warnings(caught):
 def run_report(args):
     """Run ``bayespig report``; returns the exit status."""
     from ..report import write_report
+    from ..report.write import NETCDF_SUFFIXES
 
     if not os.path.exists(args.source):
         raise ValueError(f"{args.source}: no such file")
+    eps = eps_argument(args.eps)
+    if eps is not None and Path(args.source).suffix.lower() in NETCDF_SUFFIXES:
+        raise ValueError(f"--eps: {args.source} is a posterior, inferred with its own eps; --eps applies "
+                         "only when report infers from a measurement file (or run bayespig infer --eps)")
     infer_kwargs = {"method": _METHODS[args.method], "seed": args.seed, "g": args.g,
-                    "substrate_sd": args.substrate_sd}
+                    "substrate_sd": args.substrate_sd, "eps": eps, "eps_given_as": "--eps"}
     source = read_film(args.source, args.film)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = write_report(source, args.out, measurements=args.measurements,
                               observer=args.observer, illuminant=args.illuminant, title=args.title,
-                              infer_kwargs=infer_kwargs, progress=not args.no_progress)
+                              infer_kwargs=infer_kwargs, progress=not args.no_progress,
+                              overwrite=args.overwrite)
     _print_warnings(caught)
     _print_result(result)
     return 0
@@ -80,6 +95,8 @@ def run_report(args):
 def _print_result(result):
     summary = result.summary
     flags = [f for f in summary["diagnostics"]["flags"] if f["wavelength_nm"] is not None]
+    if result.replaced:
+        print(f"replaced the earlier contents of {result.out_dir}")
     print(f"wrote {result.files['html']} and {result.files['markdown']} "
           f"({len(result.files['figures'])} figures), summary.csv, summary.json"
           + (", posterior.nc" if "netcdf" in result.files else "")
@@ -87,8 +104,11 @@ def _print_result(result):
     colour = summary["colour"]
     if colour.get("available"):
         verdict = "good enough" if colour["good_enough_for_colour_matching"] else "NOT good enough"
+        hedge = ""
+        if colour.get("verdict_assumes_eps"):
+            hedge = " if eps is the assumed 0.05 (pass --eps with your instrument's value)"
         print(f"colour spread of the measured samples: dE00 <= {colour['max_dE00_spread_measured']:.2f} "
-              f"(95th percentile) - {verdict} for colour matching")
+              f"(95th percentile) - {verdict} for colour matching{hedge}")
     if flags:
         print(f"{len(flags)} wavelength(s) flagged: "
               + ", ".join(f"{f['wavelength_nm']:g} nm" for f in flags), file=sys.stderr)
@@ -110,6 +130,8 @@ def add_demo_parser(subparsers):
     parser.add_argument("--seed", type=int, default=0, help="seed of the noise and the sampler (default 0)")
     parser.add_argument("--quick", action="store_true",
                         help="shorter runs at every second wavelength (for tests)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace the --out folder whole even when it is not an earlier report")
     parser.add_argument("--no-progress", action="store_true", help="no progress output")
     add_verbosity_arguments(parser, no_progress_alias=False)
     parser.set_defaults(func=run_demo)
@@ -124,7 +146,8 @@ def run_demo(args):
         raise ValueError(f"--seed must be a non-negative integer, got {args.seed}")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = demo(args.out, seed=args.seed, progress=not args.no_progress, quick=args.quick)
+        result = demo(args.out, seed=args.seed, progress=not args.no_progress, quick=args.quick,
+                      overwrite=args.overwrite)
     _print_warnings(caught)
     _print_result(result)
     return 0

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import base64
 import html
+import re
 from dataclasses import dataclass
 
 __all__ = [
@@ -38,9 +39,12 @@ def heading(text, level=2):
     return Block(f"h{level}", text)
 
 
-def paragraph(text):
-    """A paragraph of plain text."""
-    return Block("p", text)
+def paragraph(text, *, lead=None):
+    """A paragraph of plain text, optionally opened by a ``lead`` in bold.
+
+    Both are plain text: every character is shown as written (escaped in HTML and Markdown).
+    """
+    return Block("p", text, lead)
 
 
 def bullets(items):
@@ -104,7 +108,8 @@ def to_html(blocks, figures, title):
             anchor = "".join(c if c.isalnum() else "-" for c in block.content.lower()).strip("-")
             parts.append(f'<{kind} id="{esc(anchor)}">{esc(block.content)}</{kind}>')
         elif kind == "p":
-            parts.append(f"<p>{esc(block.content)}</p>")
+            lead = f"<strong>{esc(block.extra)}</strong> " if block.extra else ""
+            parts.append(f"<p>{lead}{esc(block.content)}</p>")
         elif kind == "list":
             parts.append("<ul>" + "".join(f"<li>{esc(_cell(i))}</li>" for i in block.content) + "</ul>")
         elif kind == "table":
@@ -124,30 +129,79 @@ def to_html(blocks, figures, title):
     return "\n".join(parts)
 
 
+#: Characters with an inline meaning in Markdown (CommonMark and GitHub's tables and
+#: strikethrough), escaped with a backslash; ``<``, ``>`` and ``&`` become HTML entities,
+#: so that no renderer passes an HTML tag through.
+_MD_INLINE = set("\\`*_[]|~")
+_MD_ENTITIES = {"<": "&lt;", ">": "&gt;", "&": "&amp;"}
+#: What opens a block at the start of a line: heading, list item, numbered item.
+#: ("#  a", "- a", "+ a", "---", "1. a"; "-0.5" and "1.5" are plain text).
+_MD_LINE_START = re.compile(r"^(\s*)([#+\-=](?=\s|$|[#+\-=])|\d+(?=[.)](?:\s|$)))")
+
+
 def _md_escape(text):
-    return str(text).replace("|", "\\|")
+    """Plain text as Markdown that renders to exactly that text (no markup, no raw HTML)."""
+    out = []
+    for char in str(text):
+        if char in _MD_ENTITIES:
+            out.append(_MD_ENTITIES[char])
+        elif char in _MD_INLINE:
+            out.append("\\" + char)
+        elif char in "\r\n":
+            out.append(" ")  # a line break would end the paragraph, list item or table row
+        else:
+            out.append(char)
+    return _escape_line_start("".join(out))
+
+
+def _escape_line_start(text):
+    """A leading ``#``, ``-``, ``+``, ``=`` or ``1.`` escaped (it would open a heading or a list)."""
+    match = _MD_LINE_START.match(text)
+    if not match:
+        return text
+    start = match.start(2)
+    if match.group(2).isdigit():  # "1." -> "1\."
+        end = match.end(2)
+        return text[:end] + "\\" + text[end:]
+    return text[:start] + "\\" + text[start:]
+
+
+def _fence(text):
+    """A backtick fence longer than any backtick run inside ``text`` (CommonMark code block)."""
+    run = best = 0
+    for char in text:
+        run = run + 1 if char == "`" else 0
+        best = max(best, run)
+    return "`" * max(3, best + 1)
 
 
 def to_markdown(blocks, figure_dir="figures"):
-    """Markdown text; figures are linked as ``<figure_dir>/<name>.png``."""
+    """Markdown text; figures are linked as ``<figure_dir>/<name>.png``.
+
+    Every text is escaped (:func:`_md_escape`): sample names, titles and file names from
+    the user render as written, never as markup or HTML.
+    """
+    esc = _md_escape
     parts = []
     for block in blocks:
         kind = block.kind
         if kind in ("h1", "h2", "h3"):
-            parts.append("#" * int(kind[1]) + " " + block.content)
+            parts.append("#" * int(kind[1]) + " " + esc(block.content))
         elif kind == "p":
-            parts.append(block.content)
+            lead = f"**{esc(block.extra)}** " if block.extra else ""
+            parts.append(lead + esc(block.content))
         elif kind == "list":
-            parts.append("\n".join(f"- {_cell(i)}" for i in block.content))
+            parts.append("\n".join(f"- {esc(_cell(i))}" for i in block.content))
         elif kind == "table":
-            lines = ["| " + " | ".join(_md_escape(_cell(h)) for h in block.content) + " |",
+            lines = ["| " + " | ".join(esc(_cell(h)) for h in block.content) + " |",
                      "|" + "|".join("---" for _ in block.content) + "|"]
-            lines += ["| " + " | ".join(_md_escape(_cell(c)) for c in row) + " |" for row in block.extra]
+            lines += ["| " + " | ".join(esc(_cell(c)) for c in row) + " |" for row in block.extra]
             parts.append("\n".join(lines))
         elif kind == "figure":
-            parts.append(f"![{block.extra}]({figure_dir}/{block.content}.png)\n\n*{block.extra}*")
+            parts.append(f"![{esc(block.extra)}]({figure_dir}/{block.content}.png)\n\n*{esc(block.extra)}*")
         elif kind == "pre":
-            parts.append("```\n" + block.content + "\n```")
+            fence = _fence(block.content)
+            parts.append(f"{fence}\n{block.content}\n{fence}")
         else:  # pragma: no cover
             raise ValueError(f"unknown block kind {kind!r}")
     return "\n\n".join(parts) + "\n"

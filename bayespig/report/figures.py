@@ -30,6 +30,12 @@ DPI = 100
 _BAND_ALPHA = {"90": 0.18, "50": 0.35}
 _COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2",
             "#7f7f7f", "#bcbd22", "#17becf")
+#: At most this many ticks per corner-plot axis (more collide at 2 inches per panel).
+CORNER_MAX_TICKS = 4
+_POINT_COLOUR = "#1f77b4"
+#: The synthetic truth: red and solid everywhere, never the black dashes of the quantiles.
+_TRUTH_COLOUR = "#d62728"
+_PANEL_COLOURS = tuple(c for c in _COLOURS if c != _TRUTH_COLOUR)
 # Delta log L at the 1, 2, 3 sigma contours of a 2-D Gaussian (chi^2 with 2 dof / 2).
 _SIGMA_LEVELS = (-5.914, -3.090, -1.148)
 
@@ -56,7 +62,7 @@ def _band_panel(ax, wl, bands, colour, label, truth=None, point=None, log=False)
     if point is not None and np.isfinite(point).any():
         ax.plot(wl, point, "k+", ms=6, label="point fit")
     if truth is not None:
-        ax.plot(wl, truth, color="k", ls="--", lw=1.0, label="truth (synthetic)")
+        ax.plot(wl, truth, color=_TRUTH_COLOUR, ls="-", lw=1.2, marker="*", ms=6, label="truth (synthetic)")
     ax.set_ylabel(label)
     if log and np.nanmax(bands["q95"]) > 10.0 * np.nanmin(bands["q05"]):
         ax.set_yscale("log")
@@ -77,7 +83,7 @@ def parameter_figure(wl, panels):
     fig = _figure(7.5, 2.4 * len(panels) + 0.4)
     axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
     for k, (ax, panel) in enumerate(zip(axes, panels)):
-        _band_panel(ax, wl, panel["bands"], _COLOURS[k % len(_COLOURS)], panel["label"],
+        _band_panel(ax, wl, panel["bands"], _PANEL_COLOURS[k % len(_PANEL_COLOURS)], panel["label"],
                     panel.get("truth"), panel.get("point"), panel.get("log", False))
     axes[0].legend(fontsize=8, ncols=3, loc="best")
     axes[-1].set_xlabel("wavelength [nm]")
@@ -104,14 +110,27 @@ def corner_figure(samples, labels, *, point=None, truth=None, title=""):
     fig.set_layout_engine(None)
     point = _marks(point)
     truth = _marks(truth)
-    corner.corner(samples, labels=labels, truths=point, truth_color="#1f77b4", fig=fig,
+    corner.corner(samples, labels=labels, truths=point, truth_color=_POINT_COLOUR, fig=fig,
                   quantiles=[0.05, 0.5, 0.95], show_titles=True, title_fmt=".3g",
                   title_kwargs={"fontsize": 9}, label_kwargs={"fontsize": 10},
-                  levels=(0.5, 0.9), plot_datapoints=True, smooth=1.0)
+                  levels=(0.5, 0.9), plot_datapoints=True, smooth=1.0, max_n_ticks=CORNER_MAX_TICKS)
+    for ax in fig.axes:
+        ax.tick_params(labelsize=8)
     if truth is not None:
-        corner.overplot_lines(fig, truth, color="k", ls="--", lw=1.0)
-    fig.suptitle(title, fontsize=11)
-    fig.subplots_adjust(top=0.88 if n <= 2 else 0.92)
+        corner.overplot_lines(fig, truth, color=_TRUTH_COLOUR, ls="-", lw=2.0, alpha=0.8)
+        corner.overplot_points(fig, [[np.nan if t is None else t for t in truth]], marker="*", ms=10,
+                               color=_TRUTH_COLOUR)
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color="k", ls="--", lw=1.0, label="5 %, 50 %, 95 % quantiles")]
+    if point is not None:
+        handles.append(Line2D([], [], color=_POINT_COLOUR, lw=1.5, label="point fit"))
+    if truth is not None:
+        handles.append(Line2D([], [], color=_TRUTH_COLOUR, lw=2.0, marker="*", ms=8, label="truth (synthetic)"))
+    fig.legend(handles=handles, loc="upper right", fontsize=8, frameon=False)
+    fig.suptitle(title, fontsize=11, x=0.05, ha="left")
+    fig.subplots_adjust(top=0.86 if n <= 2 else 0.92, bottom=0.14 if n <= 2 else 0.1,
+                        left=0.16 if n <= 2 else 0.1)
     return fig
 
 
@@ -152,7 +171,8 @@ def ravine_figure(ravine_wide, ravine_zoom, draws_a, draws_tau, *, point=None, t
         if point is not None and np.all(np.isfinite(point)):
             ax.plot(point[0], np.log10(point[1]), "b+", ms=12, mew=2, label="point fit")
         if truth is not None and np.all(np.isfinite(truth)):
-            ax.plot(truth[0], np.log10(truth[1]), "kx", ms=10, mew=2, label="truth (synthetic)")
+            ax.plot(truth[0], np.log10(truth[1]), "*", color=_TRUTH_COLOUR, mec="w", ms=14,
+                    label="truth (synthetic)")
         ax.set_xlim(extent[0], extent[1])
         ax.set_ylim(extent[2], extent[3])
         ax.yaxis.set_major_formatter(tick)
@@ -165,8 +185,12 @@ def ravine_figure(ravine_wide, ravine_zoom, draws_a, draws_tau, *, point=None, t
     return fig
 
 
-def fit_figure(wl, residuals, samples):
-    """Measured values (points) vs posterior-predictive bands (lines), one panel per sample."""
+def fit_figure(wl, residuals, samples, kinds=None):
+    """Measured values (points) vs posterior-predictive bands (lines), one panel per sample.
+
+    ``kinds``: per value (column of the residuals), a key of :data:`VALUE_LABELS`, for the
+    unit on the y axis (:func:`bayespig.report.quantities.measurement_kind`).
+    """
     rows = residuals["rows"]
     fig = _figure(7.5, 2.8 * len(samples) + 0.3)
     axes = fig.subplots(len(samples), 1, sharex=True, squeeze=False)[:, 0]
@@ -181,11 +205,28 @@ def fit_figure(wl, residuals, samples):
         ax.set_yscale("log")
         ax.set_title(f"{sample}: measured (dots), posterior predictive mean and 90 % band (lines)",
                      fontsize=9)
-        ax.set_ylabel("measured value")
+        ax.set_ylabel(_value_axis_label([kinds[k] for k in columns] if kinds is not None else []))
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7, ncols=min(len(columns), 6), loc="best")
     axes[-1].set_xlabel("wavelength [nm]")
     return fig
+
+
+#: Axis label of each kind of measured value, with its unit.
+VALUE_LABELS = {
+    "brdf": "BRDF [1/sr]",
+    "hemispherical": "hemispherical reflectance [fraction]",
+    "reflectance_factor": "reflectance factor [fraction]",
+    "transmittance": "transmittance [fraction]",
+}
+
+
+def _value_axis_label(kinds):
+    """The y label of a panel of measured values: their kind and unit (each, when mixed)."""
+    kinds = list(dict.fromkeys(kinds))
+    if not kinds or any(k not in VALUE_LABELS for k in kinds):
+        return "measured value"
+    return " / ".join(VALUE_LABELS[k] for k in kinds)
 
 
 def residual_figure(wl, residuals, samples):

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,6 +42,8 @@ from ..likelihood import FilmTerm, Priors, Problem
 
 __all__ = [
     "COLOUR_MATCH_DELTA_E",
+    "DEFAULT_EPS",
+    "EPS_SOURCE_ATTR",
     "ESS_MIN",
     "PPC_LEVEL",
     "RHAT_MAX",
@@ -53,11 +56,17 @@ __all__ = [
     "colour_spectrum",
     "default_unmeasured_films",
     "diagnostics",
+    "eps_of_run",
+    "eps_origin",
     "eps_per_value",
+    "eps_source",
     "extinction",
     "film_colour",
     "measured_colour",
+    "measurement_kind",
+    "model_check_status",
     "parameter_bands",
+    "parameters_per_wavelength",
     "posterior_draws",
     "posterior_predictive_check",
     "predicted_film_values",
@@ -65,6 +74,7 @@ __all__ = [
     "problem_from_inference",
     "provenance",
     "ravine",
+    "record_eps_source",
     "residuals_in_eps",
     "value_table",
     "wavelengths",
@@ -211,6 +221,14 @@ def value_table(idata):
         values = _value_coord(idata, name)
         columns[name] = values if values is not None else [""] * n_values
     return [{name: columns[name][k] for name in columns} for k in range(n_values)]
+
+
+def measurement_kind(row):
+    """What a measured value is: ``"brdf"`` [1/sr], ``"hemispherical"``, ``"reflectance_factor"``
+    or ``"transmittance"`` (fractions), from its row of :func:`value_table`."""
+    if _is_transmittance(row):
+        return "transmittance"
+    return _channel_of(row["channel"], row["kind"]).kind
 
 
 def _is_transmittance(row):
@@ -407,6 +425,127 @@ def eps_per_value(idata):
     return eps
 
 
+#: bayespig.infer's eps when neither the call nor the file gives one [-] (paper eq. 7).
+DEFAULT_EPS = 0.05
+#: Posterior attribute recording where a known eps came from (:func:`record_eps_source`).
+EPS_SOURCE_ATTR = "eps_source"
+
+
+def eps_source(eps, measurements, *, given_as="--eps", used=None):
+    """Where the ``eps`` of a run of :func:`bayespig.infer` comes from.
+
+    Mirrors ``infer``'s rule: a sample's own ``eps`` (a file column) first, then the ``eps``
+    argument, then the measurement set's metadata ``eps``, then :data:`DEFAULT_EPS`.
+
+    Parameters
+    ----------
+    eps : float, "infer" or None
+        The ``eps`` argument of ``infer``.
+    measurements : MeasurementSet
+    given_as : str
+        How the user gave ``eps`` (``"--eps"`` on the command line, ``"eps="`` in Python).
+    used : float, optional
+        The eps the run actually used (:func:`eps_of_run`): the metadata ``eps`` counts as the
+        source only when it is this value.
+
+    Returns
+    -------
+    dict
+        ``kind``: ``"inferred"``, ``"given"``, ``"file"`` or ``"default"``; ``as``: ``given_as``
+        for ``"given"``.
+    """
+    if isinstance(eps, str) and eps == "infer":
+        return {"kind": "inferred"}
+    samples = tuple(getattr(measurements, "samples", ()) or ())
+    if samples and all(getattr(sample, "eps", None) is not None for sample in samples):
+        return {"kind": "file"}
+    if eps is not None:
+        return {"kind": "given", "as": given_as}
+    metadata = getattr(measurements, "metadata", None) or {}
+    value = metadata.get("eps") if isinstance(metadata, Mapping) else None
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0 and \
+            (used is None or np.isclose(used, value)):
+        return {"kind": "file"}
+    return {"kind": "default"}
+
+
+def eps_of_run(idata):
+    """The known eps a posterior was inferred with (median over its values), or None."""
+    if "eps" in idata.posterior:
+        return None
+    values = eps_per_value(idata)
+    values = values[np.isfinite(values)]
+    return float(np.median(values)) if values.size else None
+
+
+def record_eps_source(idata, eps, measurements, *, given_as="--eps"):
+    """Store where the posterior's eps came from (:func:`eps_source`) in its attributes (JSON text).
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+        From ``infer(measurements, eps=eps)``.
+    eps, measurements, given_as
+        As :func:`eps_source`.
+
+    Returns
+    -------
+    dict
+        The recorded source.
+    """
+    source = eps_source(eps, measurements, given_as=given_as, used=eps_of_run(idata))
+    idata.posterior.attrs[EPS_SOURCE_ATTR] = json.dumps(source)
+    return source
+
+
+def eps_origin(idata, measurements=None):
+    """The report's words for the posterior's ``eps`` and where it came from.
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+    measurements : MeasurementSet, optional
+        When the posterior does not record its eps source: a metadata ``eps`` of these
+        measurements equal to the posterior's eps counts as its source.
+
+    Returns
+    -------
+    dict
+        ``kind`` (as :func:`eps_source`, or ``"unknown"`` when the posterior does not record
+        it), ``value`` (the known eps, its median over values; None when inferred),
+        ``assumed`` (True when eps is bayespig's default -- or may be: unrecorded and equal to
+        it), ``why`` (for an assumed eps) and ``text``, e.g. ``"eps assumed: 0.05 (the default;
+        pass --eps)"``, ``"eps given: 0.02 (--eps)"``, ``"eps inferred"``.
+    """
+    if "eps" in idata.posterior:
+        return {"kind": "inferred", "value": None, "assumed": False, "why": "",
+                "text": "eps inferred (a parameter per wavelength)"}
+    recorded = _json_attr(_attrs(idata).get(EPS_SOURCE_ATTR))
+    if not isinstance(recorded, dict) and measurements is not None:
+        guess = eps_source(None, measurements, used=eps_of_run(idata))
+        recorded = guess if guess["kind"] == "file" else None
+    kind = recorded.get("kind", "unknown") if isinstance(recorded, dict) else "unknown"
+    values = eps_per_value(idata)
+    finite = values[np.isfinite(values)]
+    value = float(np.median(finite)) if finite.size else float("nan")
+    spread = finite.size and np.ptp(finite) > 0
+    shown = (f"{finite.min():g}-{finite.max():g} (per sample)" if spread else f"{value:g}")
+    if kind == "default":
+        return {"kind": kind, "value": value, "assumed": True, "why": "the default",
+                "text": f"eps assumed: {shown} (the default; pass --eps)"}
+    if kind == "given":
+        return {"kind": kind, "value": value, "assumed": False, "why": "",
+                "text": f"eps given: {shown} ({recorded.get('as', '--eps')})"}
+    if kind == "file":
+        return {"kind": kind, "value": value, "assumed": False, "why": "",
+                "text": f"eps given: {shown} (the measurement file)"}
+    assumed = bool(np.isclose(value, DEFAULT_EPS) and not spread)
+    return {"kind": "unknown", "value": value, "assumed": assumed,
+            "why": "the posterior does not record where it came from; it equals the default" if assumed else "",
+            "text": f"eps known: {shown} (where it came from is not recorded in the posterior"
+                    + ("; it equals the default, so it may only be assumed" if assumed else "") + ")"}
+
+
 def residuals_in_eps(idata, max_draws=None):
     """Residuals of every measured value in units of its relative error (paper eq. 7).
 
@@ -474,6 +613,13 @@ def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
     misfit (it grows until the values fit), so the check then says little: read the ``eps``
     posterior instead.
 
+    A wavelength with no more measured values than parameters (an 8°/d film on black and
+    white: 2 values for ``a`` and ``tau``) cannot test the model: some parameters reproduce
+    exactly any values the model can produce, so a large ``p`` says nothing there
+    (``testable = False``; :func:`model_check_status` calls it "not testable", not "pass").
+    A small ``p`` still flags values that no parameters in the prior's support can produce
+    (e.g. a film on white darker than on black).
+
     Parameters
     ----------
     idata : arviz.InferenceData
@@ -489,7 +635,9 @@ def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
         ``p_value`` (n_wavelengths,); ``chi2`` (n_wavelengths,): ``T`` at the posterior-mean
         prediction; ``n_values`` (n_wavelengths,); ``flagged``: bool (n_wavelengths,);
         ``worst``: per wavelength the index of the value with the largest ``|z|``
-        (:func:`residuals_in_eps`), and ``z`` (n_wavelengths, n_values); ``level``.
+        (:func:`residuals_in_eps`), and ``z`` (n_wavelengths, n_values); ``level``;
+        ``n_parameters`` (n_wavelengths,) from :func:`parameters_per_wavelength` and
+        ``testable``: bool (n_wavelengths,), ``n_values > n_parameters``.
 
     Raises
     ------
@@ -525,8 +673,58 @@ def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
         z = (observed - mean) / (eps_mean * mean)
     chi2 = np.nansum(np.where(measured, z * z, 0.0), axis=-1)
     worst = np.argmax(np.where(measured, np.abs(np.nan_to_num(z, nan=np.inf)), -1.0), axis=-1)
+    n_parameters = np.full(n_values.shape, parameters_per_wavelength(idata))
+    testable = n_values > n_parameters
     return {"p_value": p_value, "chi2": chi2, "n_values": n_values, "flagged": p_value < level,
-            "worst": worst, "z": z, "level": float(level)}
+            "worst": worst, "z": z, "level": float(level), "n_parameters": n_parameters,
+            "testable": testable}
+
+
+def parameters_per_wavelength(idata):
+    """How many parameters the posterior has at each wavelength.
+
+    ``a``, one ``tau`` per film group, ``g`` when free, ``eps`` when inferred; parameters
+    shared by all wavelengths (the cards' albedo factors) are not counted.
+
+    Returns
+    -------
+    int
+    """
+    posterior = idata.posterior
+    count = int("a" in posterior)
+    if "tau_group" in posterior:
+        count += int(posterior["tau_group"].sizes["group"])
+    elif "tau" in posterior:
+        count += 1
+    for name in ("g", "eps"):
+        if name in posterior:
+            count += int(np.prod([size for dim, size in posterior[name].sizes.items()
+                                  if dim not in ("chain", "draw", "wavelength")], dtype=int))
+    return count
+
+
+def model_check_status(check):
+    """Per wavelength, the model check's verdict in words.
+
+    Parameters
+    ----------
+    check : dict
+        From :func:`posterior_predictive_check`.
+
+    Returns
+    -------
+    list of str
+        ``"pass"``, ``"misfit (p < 0.01)"`` or ``"not testable (2 values <= 2 parameters)"``.
+    """
+    out = []
+    for i in range(len(check["p_value"])):
+        if check["flagged"][i]:
+            out.append(f"misfit (p < {check['level']:g})")
+        elif not check["testable"][i]:
+            out.append(f"not testable ({check['n_values'][i]} values <= {check['n_parameters'][i]} parameters)")
+        else:
+            out.append("pass")
+    return out
 
 
 # ------------------------------------------------------------------------------------------

@@ -9,27 +9,30 @@ measurement file, inferred first) and writes into ``out_dir``:
 ``report.md`` and ``figures/*.png``
     The Markdown twin with its figures as files.
 ``summary.csv``
-    One row per wavelength: posterior mean, sd, median and 5/25/75/95 % quantiles of every
-    parameter, correlation of ``a`` with ``log tau``, point fit, ESS, R-hat, the posterior
-    predictive p-value of the model check, flags.
+    One row per wavelength (:mod:`bayespig.report.summary_table`, the same table as
+    ``bayespig infer``'s): posterior mean, sd, median, 50 % and 90 % central intervals of
+    every parameter, ESS, R-hat, correlation of ``a`` with ``log tau``, point fit, the
+    model check, flags.
 ``summary.json``
     The same numbers plus colour, fit quality and model check (the wavelengths the model
     cannot reproduce), predicted films, diagnostics and provenance.
 ``posterior.nc``
     The posterior itself (netCDF), so the report's numbers can be recomputed.
 
-Every file is written into a temporary directory inside ``out_dir`` first and moved into
-place with :func:`os.replace` once all of them exist: an error leaves no half-written file.
+The whole report is written into a fresh hidden folder beside ``out_dir`` and swapped into
+place once every file exists, so ``out_dir`` holds one complete report -- never a mix with an
+earlier one (no stale figures) -- and an error or Ctrl-C leaves it as it was. An existing
+``out_dir`` is replaced only when it is empty or an earlier bayespig report
+(:func:`check_report_folder`); anything else needs ``overwrite=True`` (``--overwrite``).
 """
 
 from __future__ import annotations
 
-import csv
 import datetime as _dt
-import io
 import json
 import os
 import shutil
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,13 +40,15 @@ from pathlib import Path
 import numpy as np
 
 from .. import colorimetry
-from .._atomic import write_file_set
+from .._atomic import _umask
 from .._json import jsonable as _jsonable
 from . import document as doc
 from . import figures as figs
 from . import quantities as q
+from . import summary_table
 
-__all__ = ["ReportResult", "load_posterior", "write_report"]
+__all__ = ["NETCDF_SUFFIXES", "REPORT_FILES", "ReportResult", "check_report_folder", "load_posterior",
+           "write_report"]
 
 #: Wavelengths [nm] near which corner plots are drawn by default.
 CORNER_WAVELENGTHS_NM = (450.0, 550.0, 650.0)
@@ -51,7 +56,10 @@ CORNER_WAVELENGTHS_NM = (450.0, 550.0, 650.0)
 MAX_COLOUR_DRAWS = 400
 #: Draws shown in corner plots and the ravine figure.
 MAX_PLOT_DRAWS = 4000
-_NETCDF_SUFFIXES = (".nc", ".nc4", ".netcdf", ".h5")
+#: What a report folder holds (``summary.json`` lists the files of a report written since).
+REPORT_FILES = ("report.html", "report.md", "summary.csv", "summary.json", "posterior.nc", "figures")
+#: File suffixes read as a posterior netCDF file (anything else is a measurement file).
+NETCDF_SUFFIXES = (".nc", ".nc4", ".netcdf", ".h5")
 
 
 @dataclass
@@ -68,6 +76,8 @@ class ReportResult:
         The content of ``summary.json``.
     seconds : float
         Time to compute and write the report (without inference) [s].
+    replaced : bool
+        Whether an earlier report (or, with ``overwrite``, another folder) was replaced.
     """
 
     out_dir: Path
@@ -75,6 +85,7 @@ class ReportResult:
     summary: dict
     seconds: float
     idata: object = field(default=None, repr=False)
+    replaced: bool = False
 
 
 # ------------------------------------------------------------------------------------------
@@ -107,7 +118,8 @@ def load_posterior(source, *, measurements=None, infer_kwargs=None, progress=Fal
         The measurements of a given posterior (for thickness, concentration, a synthetic
         truth and the pigment's name).
     infer_kwargs : dict, optional
-        Passed to :func:`bayespig.infer` when measurements are given.
+        Passed to :func:`bayespig.infer` when measurements are given; ``eps_given_as`` (not
+        passed on) names how the user gave ``eps`` for the report's text (default ``"eps="``).
     progress : bool
         Progress bars while inferring.
 
@@ -128,7 +140,7 @@ def load_posterior(source, *, measurements=None, infer_kwargs=None, progress=Fal
         path = Path(source)
         if not path.exists():
             raise ValueError(f"{path}: no such file")
-        if path.suffix.lower() in _NETCDF_SUFFIXES:
+        if path.suffix.lower() in NETCDF_SUFFIXES:
             try:
                 idata = _read_netcdf(path)
             except (OSError, ValueError, KeyError) as error:
@@ -141,7 +153,10 @@ def load_posterior(source, *, measurements=None, infer_kwargs=None, progress=Fal
         from ..inference import infer
 
         kwargs = {"progress": progress, **(infer_kwargs or {})}
-        return infer(source, **kwargs), source, True
+        given_as = kwargs.pop("eps_given_as", "eps=")
+        idata = infer(source, **kwargs)
+        q.record_eps_source(idata, kwargs.get("eps"), source, given_as=given_as)
+        return idata, source, True
     raise ValueError("write_report needs an InferenceData, a netCDF posterior, a MeasurementSet "
                      f"or a measurement file; got {type(source).__name__}")
 
@@ -239,7 +254,7 @@ def write_report(posterior_or_measurements, out_dir, *, measurements=None,
                  observer=colorimetry.DEFAULT_OBSERVER, illuminant=colorimetry.DEFAULT_ILLUMINANT,
                  title=None, corner_wavelengths=CORNER_WAVELENGTHS_NM, ravine_wavelength=None,
                  films=None, max_colour_draws=MAX_COLOUR_DRAWS, infer_kwargs=None,
-                 progress=False, save_posterior=True):
+                 progress=False, save_posterior=True, overwrite=False, extra_files=None):
     """Write the uncertainty report of one pigment.
 
     Parameters
@@ -248,7 +263,9 @@ def write_report(posterior_or_measurements, out_dir, *, measurements=None,
         A posterior from :func:`bayespig.infer` (or its netCDF file), or measurements
         (a set or a file), which are inferred first with :func:`bayespig.infer`.
     out_dir : str or os.PathLike
-        Directory to write into (created if missing; files of an earlier report are replaced).
+        Folder of the report: created if missing, replaced whole if it is empty or holds an
+        earlier bayespig report; any other existing folder is refused (checked before any work)
+        unless ``overwrite``.
     measurements : MeasurementSet, str or os.PathLike, optional
         The measurements of a given posterior: film thickness and concentration (for the
         extinction cross-section, appendix A2), a synthetic truth, the name of the source.
@@ -272,6 +289,11 @@ def write_report(posterior_or_measurements, out_dir, *, measurements=None,
         Show progress while inferring and writing.
     save_posterior : bool
         Also write ``posterior.nc``.
+    overwrite : bool
+        Replace ``out_dir`` whole even when it is not a bayespig report.
+    extra_files : dict, optional
+        Further files of the report folder: relative path -> bytes, str or a callable that
+        writes the file at the path it is given (e.g. ``{"measurements.csv": ms.to_csv}``).
 
     Returns
     -------
@@ -280,8 +302,11 @@ def write_report(posterior_or_measurements, out_dir, *, measurements=None,
     Raises
     ------
     ValueError
-        For inputs that are not a posterior or measurements, or bad colorimetric names.
+        For inputs that are not a posterior or measurements, bad colorimetric names, or an
+        ``out_dir`` that may not be replaced (:func:`check_report_folder`).
     """
+    out_dir = Path(out_dir)
+    replacing = check_report_folder(out_dir, overwrite=overwrite)
     if observer not in colorimetry.OBSERVERS:
         raise ValueError(f"observer={observer!r} is not known to colour-science; valid names: "
                          + ", ".join(colorimetry.OBSERVERS))
@@ -292,17 +317,17 @@ def write_report(posterior_or_measurements, out_dir, *, measurements=None,
                                             infer_kwargs=infer_kwargs, progress=progress)
     netcdf_source = None
     if isinstance(posterior_or_measurements, (str, os.PathLike)) and \
-            Path(posterior_or_measurements).suffix.lower() in _NETCDF_SUFFIXES:
+            Path(posterior_or_measurements).suffix.lower() in NETCDF_SUFFIXES:
         netcdf_source = Path(posterior_or_measurements)
     start = time.perf_counter()
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     content = _build(idata, measurements, observer=observer, illuminant=illuminant, title=title,
                      corner_wavelengths=corner_wavelengths, ravine_wavelength=ravine_wavelength,
                      films=films, max_colour_draws=max_colour_draws, progress=progress)
-    files = _write_files(out_dir, content, (netcdf_source or idata) if save_posterior else None)
+    check_report_folder(out_dir, overwrite=overwrite)  # still so after the inference
+    files = _write_files(out_dir, content, (netcdf_source or idata) if save_posterior else None,
+                         extra_files or {})
     seconds = time.perf_counter() - start
-    return ReportResult(out_dir, files, content["summary"], seconds, idata)
+    return ReportResult(out_dir, files, content["summary"], seconds, idata, replacing)
 
 
 def _say(progress, message):
@@ -360,18 +385,19 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     blocks.append(doc.paragraph(intro))
     if synthetic:
         blocks.append(doc.paragraph(f"SYNTHETIC DATA - {synthetic}: the measurements were simulated; "
-                                    "dashed lines and crosses mark the true values."))
+                                    "red lines and stars mark the true values."))
     film_lines = []
     for f in problem.films:
         substrate = "opaque" if f.opaque else f"r_s median {_fmt(float(np.median(f.r_s)))}"
         geometry = ", ".join(f.instrument.labels) if f.instrument else "specular transmittance"
         film_lines.append(f"{f.name} ({substrate}; {geometry})")
-    eps_text = ("eps inferred" if "eps" in bands
-                else f"eps known: {_fmt(float(np.nanmedian(q.eps_per_value(idata))))}")
+    eps_info = q.eps_origin(idata, measurements)
+    eps_text = eps_info["text"]
     blocks.append(doc.bullets([
         f"Source: {source or 'posterior given directly'}",
         "Samples: " + ", ".join(film_lines),
         f"Noise model: x_obs = x_model (1 + eps xi), paper eq. 7; {eps_text}",
+        f"Phase function: {_phase_text(idata, prov)}",
         f"Chains x draws: {diag['n_chains']} x {diag['n_draws']}; seed {prov.get('seed', 'n/a')}",
     ]))
 
@@ -392,19 +418,37 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         f"Diagnostics: {len(flagged)} of {wl.size} wavelengths flagged"
         + (" (see Diagnostics below)." if flagged else " - every wavelength converged "
            f"(R-hat <= {diag['rhat_max']:g}, bulk ESS >= {diag['ess_min']:g}).")))
-    check = q.posterior_predictive_check(idata, max_draws=max_colour_draws)
+    check = q.posterior_predictive_check(idata)  # every draw: the p of summary.csv, as infer writes it
     value_rows = q.value_table(idata)
     misfit = _model_check_rows(wl, check, value_rows)
+    untestable = np.flatnonzero(~check["testable"] & ~check["flagged"])
+    untestable_text = ""
+    if untestable.size:
+        where = ("every wavelength" if untestable.size == wl.size else
+                 f"{untestable.size} of {wl.size} wavelengths ({', '.join(f'{wl[i]:g}' for i in untestable)} nm)")
+        untestable_text = (
+            f"The model check cannot test anything at {where}: there are no more measured values "
+            f"({int(check['n_values'][untestable[0]])}) than parameters "
+            f"({int(check['n_parameters'][untestable[0]])}), so some parameters reproduce exactly any values "
+            "the model can produce, and the check passes whatever the model misses"
+            + ("; eps cannot be inferred from them either (its posterior there is its prior)"
+               if "eps" in bands else "")
+            + ". Not testable (n values <= n parameters): measure more geometries, replicates or another "
+            "film to test the model.")
     if misfit:
         blocks.append(doc.paragraph(
-            f"**Model check: the model cannot reproduce the measurements at {len(misfit)} of {wl.size} "
-            f"wavelengths** ({', '.join(m['wavelength_nm_text'] for m in misfit)} nm; posterior predictive "
+            f"({', '.join(m['wavelength_nm_text'] for m in misfit)} nm; posterior predictive "
             f"p < {check['level']:g}). There the parameters are the best compromise of a model that does "
-            "not fit, not a measurement of the pigment - see Fit quality."))
+            "not fit, not a measurement of the pigment - see Fit quality." + (" " + untestable_text if untestable_text else ""),
+            lead=f"Model check: the model cannot reproduce the measurements at {len(misfit)} of {wl.size} "
+                 "wavelengths"))
+    elif untestable.size == wl.size:
+        blocks.append(doc.paragraph(untestable_text, lead="Model check: not testable."))
     else:
         blocks.append(doc.paragraph(
-            f"Model check: the model reproduces the measurements within their noise at every wavelength "
-            f"(posterior predictive p >= {check['level']:g})."))
+            "Model check: the model reproduces the measurements within their noise at every "
+            + ("testable " if untestable.size else "") + "wavelength "
+            f"(posterior predictive p >= {check['level']:g})." + (" " + untestable_text if untestable_text else "")))
     colour_slot = len(blocks)  # the colour verdict goes here once computed
 
     blocks.append(doc.heading("Optical properties"))
@@ -423,7 +467,7 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     add_figure("parameters", figs.parameter_figure(wl, panels),
                "Posterior median (line) with 50 % and 90 % central intervals (bands); + point fit"
                + (" (at g = 0, the start of the sampler)" if "g" in bands else "")
-               + ("; dashed: truth of the synthetic pigment" if truth else "") + ". tau is the optical "
+               + ("; red line with stars: truth of the synthetic pigment" if truth else "") + ". tau is the optical "
                f"thickness of film group '{groups[0] if groups else 'n/a'}'.")
     factors = q.card_factors(idata)
     if factors:
@@ -463,7 +507,8 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     blocks.append(doc.paragraph(
         "Corner plots show the joint posterior at single wavelengths: a long, tilted cloud means "
         "the data constrain a combination of parameters better than each one - the paper's "
-        "'ravine'. Blue lines: point fit (least squares, the paper's procedure); contours at "
+        "'ravine'. Blue lines: point fit (least squares, the paper's procedure); black dashes: the 5 %, "
+        "50 % and 95 % quantiles; red lines and star: the truth of a synthetic pigment; contours at "
         "50 % and 90 %; titles give the median and the 5 %/95 % quantiles."))
     a_plot = q.posterior_draws(idata, "a", MAX_PLOT_DRAWS)
     tau_plot = q.posterior_draws(idata, "tau", MAX_PLOT_DRAWS)
@@ -487,7 +532,7 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
                 tr[labels.index("g")] = float(truth["g"])
         add_figure(f"corner_{wl[i]:g}nm",
                    figs.corner_figure(samples, labels, point=pt, truth=tr, title=f"{wl[i]:g} nm"),
-                   f"Joint posterior at {wl[i]:g} nm" + (" (dashed black: truth)" if tr else "") + ".")
+                   f"Joint posterior at {wl[i]:g} nm" + (" (red: truth)" if tr else "") + ".")
 
     sd_log_tau = np.log(tau).std(axis=0)
     r_index = (int(np.argmax(sd_log_tau)) if ravine_wavelength is None
@@ -519,7 +564,8 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     blocks.append(doc.heading("Fit quality"))
     residuals = q.residuals_in_eps(idata, max_draws=max_colour_draws)
     samples_measured = list(dict.fromkeys(r["sample"] for r in residuals["rows"]))
-    add_figure("fit", figs.fit_figure(wl, residuals, samples_measured),
+    add_figure("fit", figs.fit_figure(wl, residuals, samples_measured,
+                                      [q.measurement_kind(r) for r in residuals["rows"]]),
                "Measured values (dots) and the posterior predictive (noise-free model) mean and 90 % "
                "band (lines), per sample and geometry.")
     add_figure("residuals", figs.residual_figure(wl, residuals, samples_measured),
@@ -616,11 +662,19 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
                                "max_dE00_spread_measured": worst_measured,
                                "max_dE00_spread_all": max(spreads) if spreads else None,
                                "good_enough_for_colour_matching": verdict})
-        blocks.insert(colour_slot, doc.paragraph(
-            f"Colour: the posterior spread of the predicted colour of the measured samples is at most "
-            f"Delta E00 = {worst_measured:.2f} (95th percentile) - "
-            + ("good enough for colour matching (< 1)." if verdict else
-               "NOT good enough for colour matching (>= 1): measure more samples or geometries.")))
+        colour_summary["verdict_assumes_eps"] = eps_info["assumed"]
+        spread_text = (f"Colour: the posterior spread of the predicted colour of the measured samples is at most "
+                       f"Delta E00 = {worst_measured:.2f} (95th percentile) - ")
+        if eps_info["assumed"]:
+            spread_text += (
+                ("good enough for colour matching (< 1)" if verdict else "NOT good enough for colour matching (>= 1)")
+                + f" if eps really is {eps_info['value']:g}, which was only assumed ({eps_info['why']}). "
+                "The spread grows with eps: measure replicates to know your instrument's eps and pass --eps "
+                "before judging.")
+        else:
+            spread_text += ("good enough for colour matching (< 1)." if verdict else
+                            "NOT good enough for colour matching (>= 1): measure more samples or geometries.")
+        blocks.insert(colour_slot, doc.paragraph(spread_text))
 
     # ---- diagnostics and provenance
     _say(progress, "diagnostics")
@@ -655,9 +709,23 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         "colour": colour_summary, "priors": priors.describe(),
         "ravine_wavelength_nm": float(wl[r_index]), "provenance": prov,
     }
-    csv_text = _summary_csv(wl, bands, corr, point, diag, extinction, check["p_value"])
+    csv_text = summary_table.summary_csv(idata, measurements=measurements, check=check, diagnostics=diag)
     return {"blocks": blocks, "figures": pngs, "summary": _jsonable(summary), "csv": csv_text,
             "title": title}
+
+
+def _phase_text(idata, prov):
+    """How the report's posterior treats the Henyey-Greenstein ``g``, in words."""
+    if "g" in idata.posterior:
+        return "Henyey-Greenstein g is a parameter at every wavelength (inferred, see below)"
+    g = prov.get("g", "isotropic")
+    if g in (None, "isotropic", 0, 0.0):
+        return ("g = 0 fixed (isotropic scattering; not inferred - bayespig infer --g free makes it a "
+                "parameter)")
+    try:
+        return f"Henyey-Greenstein g = {float(g):g} fixed (not inferred)"
+    except (TypeError, ValueError):
+        return f"g: {g}"
 
 
 def _lab(lab):
@@ -676,48 +744,136 @@ def _model_check_rows(wl, check, value_rows):
     return rows
 
 
-def _summary_csv(wl, bands, corr, point, diag, extinction, ppc_p_value):
-    columns = {"wavelength_nm": wl}
-    for name, b in bands.items():
-        for stat in ("mean", "sd", "median", "q05", "q25", "q75", "q95"):
-            columns[f"{name}_{stat}"] = b[stat]
-    for name in ("k_ext", "sigma_ext"):
-        if name in extinction:
-            for stat in ("mean", "sd", "median", "q05", "q95"):
-                columns[f"{name}_{stat}"] = extinction[name][stat]
-    columns["corr_a_log_tau"] = corr
-    columns["point_a"] = point["a"]
-    columns["point_tau"] = point["tau"]
-    columns["ppc_p_value"] = ppc_p_value
-    for name in diag["ess"]:
-        columns[f"ess_bulk_{name}"] = diag["ess"][name]
-        columns[f"rhat_{name}"] = diag["rhat"][name]
-    flagged = {f["wavelength_nm"]: "; ".join(f["reasons"]) for f in diag["flags"]}
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(list(columns) + ["flags"])
-    for i, w in enumerate(wl):
-        writer.writerow([repr(float(columns[c][i])) for c in columns] + [flagged.get(float(w), "")])
-    return buffer.getvalue()
-
-
-def _write_files(out_dir, content, idata):
-    """Write everything into a temporary directory in ``out_dir``, then move it into place."""
-    # figures first, the pages that link them last
+def _write_files(out_dir, content, idata, extra_files):
+    """Write the whole report into a fresh folder beside ``out_dir``, then swap it into place."""
     contents = {f"figures/{name}.png": png for name, png in content["figures"].items()}
     if idata is not None:
         contents["posterior.nc"] = lambda path: _save_netcdf(idata, path)
+    contents.update(extra_files)
     contents["summary.csv"] = content["csv"]
-    contents["summary.json"] = json.dumps(content["summary"], indent=1, allow_nan=False, default=str) + "\n"
+    summary = dict(content["summary"])
+    summary["files"] = sorted(set(contents) | {"summary.json", "report.md", "report.html"})
+    contents["summary.json"] = json.dumps(summary, indent=1, allow_nan=False, default=str) + "\n"
     contents["report.md"] = doc.to_markdown(content["blocks"])
     contents["report.html"] = doc.to_html(content["blocks"], content["figures"], content["title"])
-    written = write_file_set(out_dir, contents)
-    files = {"figures": [written[f"figures/{name}.png"] for name in content["figures"]]}
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))
+    try:
+        for relative, value in contents.items():
+            target = staging / relative
+            target.parent.mkdir(parents=True, exist_ok=True)
+            if callable(value):
+                value(target)
+            elif isinstance(value, bytes):
+                target.write_bytes(value)
+            else:
+                target.write_text(value, encoding="utf-8")
+        for folder in [staging, *(p for p in staging.rglob("*") if p.is_dir())]:
+            os.chmod(folder, 0o777 & ~_umask())
+        _swap_into_place(staging, out_dir)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    content["summary"]["files"] = summary["files"]
+    files = {"figures": [out_dir / f"figures/{name}.png" for name in content["figures"]]}
     for role, name in (("netcdf", "posterior.nc"), ("csv", "summary.csv"), ("json", "summary.json"),
                        ("markdown", "report.md"), ("html", "report.html")):
-        if name in written:
-            files[role] = written[name]
+        if name in contents:
+            files[role] = out_dir / name
     return files
+
+
+def _swap_into_place(staging, out_dir):
+    """Move the complete folder ``staging`` to ``out_dir``, replacing what is there whole.
+
+    Two renames in the same parent folder; if the second fails the old folder is put back.
+    """
+    if not (out_dir.exists() or out_dir.is_symlink()):
+        os.rename(staging, out_dir)
+        return
+    old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".old", dir=out_dir.parent))
+    os.rmdir(old)
+    os.rename(out_dir, old)
+    try:
+        os.rename(staging, out_dir)
+    except BaseException:
+        os.rename(old, out_dir)
+        raise
+    if old.is_symlink() or not old.is_dir():
+        old.unlink()
+    else:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _is_report_folder(folder, entries):
+    """Whether ``folder`` holds an earlier bayespig report and nothing else."""
+    try:
+        summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    if not isinstance(summary, dict) or "provenance" not in summary or not (folder / "report.html").is_file():
+        return False
+    listed = summary.get("files")
+    known = ({str(Path(f).parts[0]) for f in listed if isinstance(f, str) and f}
+             if isinstance(listed, list) else set(REPORT_FILES) | {"measurements.csv"})
+    return all(entry.name in known for entry in entries)
+
+
+def check_report_folder(out_dir, *, overwrite=False):
+    """Check, before any work, that a report may be written to ``out_dir``.
+
+    A missing folder (its parents are created), an empty one and an earlier bayespig report
+    (``summary.json`` and ``report.html`` and nothing the report did not write) may be
+    replaced; any other existing folder only with ``overwrite``.
+
+    Parameters
+    ----------
+    out_dir : str or os.PathLike
+    overwrite : bool
+
+    Returns
+    -------
+    bool
+        Whether something that exists will be replaced.
+
+    Raises
+    ------
+    ValueError
+        Naming the folder and what to do, e.g. ``run: the folder exists and is not a bayespig
+        report (it holds posterior.nc, summary.csv); write the report into a new folder (e.g.
+        --out run/report) or pass --overwrite to replace the whole folder``.
+    """
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ValueError(f"{out_dir}: exists and is not a folder; choose another output folder")
+    if out_dir.is_dir():
+        try:
+            entries = sorted(out_dir.iterdir())
+        except OSError as error:
+            raise ValueError(f"{out_dir}: cannot read the folder ({error.strerror})") from None
+        if Path.cwd().resolve().is_relative_to(out_dir.resolve()):
+            raise ValueError(f"{out_dir}: is the current folder (or holds it), which cannot be replaced; "
+                             "choose another output folder")
+        if entries and not overwrite and not _is_report_folder(out_dir, entries):
+            names = [e.name + ("/" if e.is_dir() else "") for e in entries]
+            shown = ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
+            raise ValueError(f"{out_dir}: the folder exists and is not a bayespig report (it holds {shown}); "
+                             f"write the report into a new folder (e.g. --out {out_dir / 'report'}) or pass "
+                             "--overwrite to replace the whole folder")
+        existing = bool(entries)
+    else:
+        existing = False
+    parent = out_dir.absolute().parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise ValueError(f"{out_dir}: {parent} is not a folder; choose another output folder")
+    try:  # the report's staging folder goes beside out_dir: try one there
+        os.rmdir(tempfile.mkdtemp(prefix=".bayespig-check.", dir=parent))
+    except OSError as error:
+        raise ValueError(f"{out_dir}: cannot write into {parent} ({error.strerror or error}); "
+                         "choose another output folder") from None
+    return existing
 
 
 def _save_netcdf(idata, path):

@@ -60,6 +60,7 @@ __all__ = [
     "PAPER_TAU0",
     "PAPER_TAU_RMS",
     "STATISTICS",
+    "STATISTIC_LABELS",
     "RobustnessGrid",
     "RobustnessResult",
     "opacity_contrast",
@@ -141,6 +142,23 @@ STATISTICS = (
     "fraction_tau_at_upper",
     "fraction_converged",
 )
+#: Panel titles (with units) of the statistics in :func:`plot_robustness_map`.
+STATISTIC_LABELS = {
+    "a_bias": "bias of a [-]",
+    "a_rms": "RMS error of a [-]",
+    "a_mad": "robust sd (MAD) of a [-]",
+    "a_half_width_68": "68 % half-width of a [-]",
+    "tau_bias": "bias of tau [-]",
+    "tau_rms": "RMS error of tau [-]",
+    "tau_mad": "robust sd (MAD) of tau [-]",
+    "tau_half_width_68": "68 % half-width of tau [-]",
+    "tau_rms_interior": "RMS error of tau off bounds [-]",
+    "tau_rms_relative": "RMS error of tau / tau0 [-]",
+    "fraction_at_bound": "fraction of fits at a bound",
+    "fraction_a_at_bound": "fraction of fits with a at a bound",
+    "fraction_tau_at_upper": "fraction of fits with tau at its upper bound",
+    "fraction_converged": "fraction of fits converged",
+}
 #: Starting tau of the plain local searches in the report's tau0 = 2 analysis (a starts at 0.1).
 LOCAL_START_TAUS = (4.0, 10.0, 30.0)
 #: Replicates fitted per batch (bounds the memory of the grid scan).
@@ -743,13 +761,17 @@ def opacity_contrast(method, a0, tau0, instrument="multi-angle-45"):
 def plot_robustness_map(grid, path=None, *, statistics=("a_rms", "tau_rms_relative")):
     """One panel per method and statistic over the ``(a0, tau0)`` plane (Agg, no pyplot).
 
+    The axes are those of the method comparison's maps
+    (:func:`bayespig.studies.compare.write_compare_report`): ``tau0`` across, ``a0`` up.
+
     Parameters
     ----------
     grid : RobustnessGrid
     path : path, optional
         Where to save the figure (format from the suffix), written atomically.
     statistics : sequence of str
-        Rows of panels, from :data:`STATISTICS`; colours on a log scale.
+        Rows of panels, from :data:`STATISTICS` (titles from :data:`STATISTIC_LABELS`); colours
+        on a log scale.
 
     Returns
     -------
@@ -763,14 +785,15 @@ def plot_robustness_map(grid, path=None, *, statistics=("a_rms", "tau_rms_relati
     axes = figure.subplots(n_rows, n_cols, squeeze=False)
     for row, name in enumerate(statistics):
         values = grid.statistic(name)
+        label = STATISTIC_LABELS.get(name, name)
         positive = values[np.isfinite(values) & (values > 0)]
         norm = LogNorm(positive.min(), positive.max()) if positive.size else None
         for col, method in enumerate(grid.methods):
             ax = axes[row, col]
-            data = np.where(values[col] > 0, values[col], np.nan).T  # (tau0, a0)
+            data = np.where(values[col] > 0, values[col], np.nan)  # (a0, tau0): a0 up, tau0 across
             mesh = ax.pcolormesh(
-                np.arange(len(grid.a0_values) + 1),
                 np.arange(len(grid.tau0_values) + 1),
+                np.arange(len(grid.a0_values) + 1),
                 data,
                 norm=norm,
                 cmap="viridis",
@@ -787,14 +810,13 @@ def plot_robustness_map(grid, path=None, *, statistics=("a_rms", "tau_rms_relati
                             fontsize=7,
                             color="white" if norm is not None and norm(value) < 0.5 else "black",
                         )
-            ax.set_xticks(np.arange(len(grid.a0_values)) + 0.5, [f"{a:g}" for a in grid.a0_values])
-            ax.set_yticks(
-                np.arange(len(grid.tau0_values)) + 0.5, [f"{t:g}" for t in grid.tau0_values]
-            )
-            ax.set_xlabel("a0 [-]")
-            ax.set_ylabel("tau0 [-]")
-            ax.set_title(f"{method}: {name}", fontsize=9)
-        figure.colorbar(mesh, ax=axes[row, :].tolist(), shrink=0.9)
+            ax.set_xticks(np.arange(len(grid.tau0_values)) + 0.5, [f"{t:g}" for t in grid.tau0_values])
+            ax.set_yticks(np.arange(len(grid.a0_values)) + 0.5, [f"{a:g}" for a in grid.a0_values])
+            ax.set_xlabel("tau0 [-]")
+            if col == 0:
+                ax.set_ylabel("a0 [-]")
+            ax.set_title(f"{method}: {label}", fontsize=9)
+        figure.colorbar(mesh, ax=axes[row, :].tolist(), shrink=0.9, label=label)
     if path is not None:
         path = Path(path)
         with atomic_path(path) as tmp:

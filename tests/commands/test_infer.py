@@ -28,7 +28,7 @@ def test_infer_writes_posterior_and_summary(tmp_path, capsys):
     assert "method4" in printed and "a_mean" in printed and "posterior.nc" in printed
     idata = load_inference(out / "posterior.nc")
     assert idata.posterior.attrs["seed"] == 2 and idata.posterior.attrs["method"] == "method4"
-    summary = pd.read_csv(out / "summary.csv", index_col="wavelength")
+    summary = pd.read_csv(out / "summary.csv", index_col="wavelength_nm")
     assert list(summary.index) == [500.0, 600.0]
     np.testing.assert_allclose(summary["a_mean"], idata.posterior["a"].mean(("chain", "draw")), rtol=1e-5)
     assert sorted(p.name for p in out.iterdir()) == ["posterior.nc", "summary.csv"]

@@ -155,3 +155,71 @@ def test_report_shows_where_the_model_cannot_reproduce_the_measurements(demo_ida
     assert f"cannot reproduce the measurements at 1 of {wl.size} wavelengths** ({wl[band]:g} nm" in glance
     csv_header = (tmp_path / "misfit" / "summary.csv").read_text().splitlines()[0]
     assert "ppc_p_value" in csv_header.split(",")
+
+
+# ------------------------------------------------------------------------------------------
+# the output folder: refused unless it is a report, replaced whole, nothing left on errors
+
+
+def _hidden_siblings(folder):
+    return sorted(p.name for p in folder.parent.iterdir() if p.name.startswith("."))
+
+
+def test_a_folder_that_is_not_a_report_is_refused_before_any_work(demo_idata, tmp_path, monkeypatch):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+
+    def no_inference(*args, **kwargs):
+        raise AssertionError("inferred before checking the output folder")
+
+    monkeypatch.setattr(write_module, "load_posterior", no_inference)
+    with pytest.raises(ValueError) as error:
+        write_report(demo_idata, out)
+    assert str(error.value) == (
+        f"{out}: the folder exists and is not a bayespig report (it holds notes.txt); write the report "
+        f"into a new folder (e.g. --out {out / 'report'}) or pass --overwrite to replace the whole folder")
+    assert (out / "notes.txt").read_text() == "mine" and not _hidden_siblings(out)
+
+
+def test_overwrite_replaces_the_whole_folder(demo_idata, tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    result = write_report(demo_idata, out, overwrite=True, corner_wavelengths=(), save_posterior=False)
+    assert result.replaced and not (out / "notes.txt").exists() and (out / "report.html").is_file()
+    assert not _hidden_siblings(out)
+
+
+def test_a_file_as_output_folder_is_refused(demo_idata, tmp_path):
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    with pytest.raises(ValueError, match=f"^{re.escape(str(afile))}: exists and is not a folder; choose another"):
+        write_report(demo_idata, afile)
+
+
+def test_an_earlier_report_is_replaced_whole_without_stale_figures(demo_dir, demo_idata, tmp_path):
+    out = tmp_path / "again"
+    shutil.copytree(demo_dir, out)
+    old_figures = {p.name for p in (out / "figures").iterdir()}
+    assert {"corner_460nm.png", "ravine.png"} <= old_figures
+    result = write_report(demo_idata, out, corner_wavelengths=(), save_posterior=False)
+    assert result.replaced
+    new_figures = {p.name for p in (out / "figures").iterdir()}
+    assert not any(name.startswith("corner_") for name in new_figures)  # none left from the old report
+    assert not (out / "posterior.nc").exists() and not (out / "measurements.csv").exists()
+    assert sorted(p.name for p in out.iterdir()) == ["figures", "report.html", "report.md", "summary.csv",
+                                                     "summary.json"]
+    assert not _hidden_siblings(out)
+
+
+def test_an_interrupted_report_leaves_nothing(demo_idata, tmp_path):
+    """Ctrl-C while the files are being written: no output folder, no hidden staging folder."""
+    def interrupt(path):
+        assert path.parent.name.startswith(".report.") and path.parent.name.endswith(".tmp")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        write_report(demo_idata, tmp_path / "new" / "report", save_posterior=False, corner_wavelengths=(),
+                     extra_files={"z.txt": interrupt})
+    assert [p.name for p in tmp_path.rglob("*")] == ["new"]  # the parent stays, empty
