@@ -36,7 +36,7 @@ def read_netcdf(path):
 
     path = Path(path)
     if not path.exists():
-        raise ValueError(f"'{path}' cannot be read: no such file")
+        raise ValueError(f"'{path}' cannot be read: file not found")
     if path.is_dir():
         raise ValueError(f"'{path}' cannot be read: it is a folder, not a posterior file")
     try:

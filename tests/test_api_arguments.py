@@ -162,7 +162,7 @@ BAD_CALLS = {
     "FitSettings start str": (lambda: FitSettings(start="x"), TypeError, "start must be"),
     "FitSettings objective None": (lambda: FitSettings(objective=None), ValueError, "objective must be one of"),
     # simulation-based calibration (all refused before any work)
-    "sbc method": (lambda: simulation_based_calibration("x"), ValueError, "method must be one of 'method1', 'method2', 'method3', 'method4', got 'x'"),
+    "sbc method": (lambda: simulation_based_calibration("x"), ValueError, "unknown method 'x': method must be one of 1, 2, 3, 4, method1, method2, method3, method4"),
     "sbc n_replicates str": (lambda: simulation_based_calibration(n_replicates="5"), TypeError, "n_replicates must be an integer, got '5' (str)"),
     "sbc n_replicates float": (lambda: simulation_based_calibration(n_replicates=2.5), TypeError, "n_replicates must be an integer, got 2.5"),
     "sbc n_replicates bool": (lambda: simulation_based_calibration(n_replicates=True), TypeError, "n_replicates must be an integer, not a boolean"),

@@ -62,7 +62,7 @@ def test_byte_flipped_posterior_names_the_file(posterior_file, monkeypatch):
     [
         (lambda p: p.write_text("wavelength,a\n400,0.1\n"), "it is damaged or not a bayespig posterior (OSError: "),
         (lambda p: p.write_bytes(p.read_bytes()[:1000]), "it is damaged or not a bayespig posterior ("),
-        (lambda p: p.unlink(), "no such file"),
+        (lambda p: p.unlink(), "file not found"),
         (lambda p: (p.unlink(), p.mkdir()), "it is a folder, not a posterior file"),
     ],
     ids=["text", "truncated", "missing", "folder"],

@@ -89,7 +89,7 @@ def run_infer(args):
                                                  ("max_steps", args.max_steps)) if value is not None}
     settings = InferenceSettings(**overrides)
     if not os.path.exists(args.measurements):
-        raise ValueError(f"{args.measurements}: no such file")
+        raise ValueError(f"{args.measurements}: file not found")
     measurements = read_film(args.measurements, args.film)
     if isinstance(measurements, (str, os.PathLike)):
         from ..data import read_measurements

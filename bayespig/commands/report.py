@@ -73,7 +73,7 @@ def run_report(args):
     from ..report.write import NETCDF_SUFFIXES
 
     if not os.path.exists(args.source):
-        raise ValueError(f"{args.source}: no such file")
+        raise ValueError(f"{args.source}: file not found")
     eps = eps_argument(args.eps)
     if eps is not None and Path(args.source).suffix.lower() in NETCDF_SUFFIXES:
         raise ValueError(f"--eps: {args.source} is a posterior, inferred with its own eps; --eps applies "

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import time
 import warnings
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -38,7 +39,7 @@ def _resolve_eps(eps, measurements):
         return None, "inferred"
     if eps is None:
         metadata = getattr(measurements, "metadata", None) or {}
-        value = metadata.get("eps") if isinstance(metadata, dict) else None
+        value = metadata.get("eps") if isinstance(metadata, Mapping) else None
         eps = float(value) if isinstance(value, (int, float)) and value > 0 else 0.05
     return eps, "known"
 

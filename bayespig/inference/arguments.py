@@ -11,7 +11,7 @@ import numbers
 
 import numpy as np
 
-from ..likelihood import Priors
+from ..likelihood import Priors, method_name
 from .settings import InferenceSettings
 
 __all__ = [
@@ -30,8 +30,6 @@ __all__ = [
 #: Open interval of a known relative error ``eps`` [-]: a relative standard deviation of the
 #: measured values (eq. 7), 0.02 for 2 %; 1 or more would be noise as large as the signal.
 EPS_RANGE = (0.0, 1.0)
-#: The paper's methods as numbers and names.
-METHOD_NAMES = ("auto", "general", "method1", "method2", "method3", "method4")
 
 
 def _shown(value):
@@ -66,20 +64,10 @@ def check_method(method):
     """``method`` as the name :meth:`bayespig.likelihood.Problem.from_measurements` takes.
 
     Accepts ``"auto"``, ``"general"``, ``"method1"`` ... ``"method4"``, and the numbers 1 ... 4
-    (int or their digits as str).
+    (int or their digits as str): :func:`bayespig.likelihood.method_name`, the one normaliser
+    every entry point shares.
     """
-    expected = "'auto', 'general', 'method1' ... 'method4' or 1 ... 4"
-    if isinstance(method, (bool, np.bool_)) or not isinstance(method, (str, numbers.Integral, np.integer)):
-        raise TypeError(f"method must be {expected}, got {_shown(method)}")
-    if isinstance(method, str) and method in ("1", "2", "3", "4"):
-        method = int(method)
-    if not isinstance(method, str):
-        if not 1 <= method <= 4:
-            raise ValueError(f"method must be {expected}, got {method!r}")
-        return f"method{int(method)}"
-    if method not in METHOD_NAMES:
-        raise ValueError(f"method must be {expected}, got {method!r}")
-    return method
+    return method_name(method)
 
 
 def eps_argument(eps):

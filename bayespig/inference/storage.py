@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 
 from .._atomic import atomic_path
+from .._storage import read_netcdf
 
 __all__ = ["load_inference", "save_inference"]
 
@@ -32,15 +33,7 @@ def load_inference(path):
     ValueError
         When the file is missing or not an inference result.
     """
-    import arviz as az
-
-    path = os.fspath(path)
-    if not os.path.exists(path):
-        raise ValueError(f"{path}: no such file")
-    try:
-        idata = az.from_netcdf(path)
-    except (OSError, ValueError) as error:
-        raise ValueError(f"{path}: not a netCDF inference file ({error})") from None
+    idata = read_netcdf(path)
     if "posterior" not in idata.groups() or "a" not in idata.posterior:
-        raise ValueError(f"{path}: no posterior of 'a' — not written by bayespig.infer")
+        raise ValueError(f"'{path}': no posterior of 'a' — not written by bayespig.infer")
     return idata

@@ -139,7 +139,7 @@ def load_posterior(source, *, measurements=None, infer_kwargs=None, progress=Fal
     if isinstance(source, (str, os.PathLike)):
         path = Path(source)
         if not path.exists():
-            raise ValueError(f"{path}: no such file")
+            raise ValueError(f"{path}: file not found")
         if path.suffix.lower() in NETCDF_SUFFIXES:
             try:
                 idata = _read_netcdf(path)

@@ -39,9 +39,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._atomic import atomic_path, write_text_atomically
-from .._validation import choice, integer, real_scalar
+from .._validation import integer, real_scalar
 from ..instruments import get_instrument
-from ..likelihood import Priors, Problem
+from ..likelihood import Priors, Problem, method_name
 
 __all__ = [
     "CalibrationResult",
@@ -70,7 +70,6 @@ def _short_runs():
 #: Wavelengths labelling the replicates of the simulated set [nm] (any increasing values).
 _FIRST_LABEL_NM = 1000.0
 #: The designs simulation_based_calibration simulates and fits.
-_SBC_METHODS = ("method1", "method2", "method3", "method4")
 #: Largest relative error simulated: eq. (7) makes sense only well below this (the prior's
 #: upper end, Priors.eps_range) [-].
 _EPS_MAX = 0.5
@@ -207,9 +206,7 @@ def simulation_based_calibration(method="method4", *, n_replicates=200, n_draws=
     from ..inference import ConvergenceWarning, InferenceSettings, _versions, infer_problem
     from ..table import load_table
 
-    if isinstance(method, str) and method.isdigit() or isinstance(method, int) and not isinstance(method, bool):
-        method = f"method{method}"  # 4 and "4" as the command line spells them
-    choice("method", method, _SBC_METHODS)
+    method = method_name(method, also=())  # 4, "4" and "method4" alike
     n_replicates = integer("n_replicates", n_replicates, low=2)
     n_draws = integer("n_draws", n_draws, low=1)
     n_bins = integer("n_bins", n_bins, low=1)

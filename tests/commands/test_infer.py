@@ -44,7 +44,7 @@ def test_bad_eps_is_a_clear_error(tmp_path, eps):
 
 
 def test_missing_file_writes_nothing(tmp_path):
-    with pytest.raises(ValueError, match="no such file"):
+    with pytest.raises(ValueError, match="file not found"):
         run(["infer", str(tmp_path / "nothing.csv"), "--out", str(tmp_path / "out")])
     assert not (tmp_path / "out").exists()
 

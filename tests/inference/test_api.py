@@ -197,7 +197,7 @@ def test_general_problem_with_two_groups_has_tau_group():
 
 _EPS_RANGE = "(0, 1) (a relative error, e.g. 0.02 for 2 %)"
 _EPS_KIND = f"eps must be a number in {_EPS_RANGE}, 'infer' or None, got "
-_METHOD = "method must be 'auto', 'general', 'method1' ... 'method4' or 1 ... 4, got "
+_VALID_METHODS = "1, 2, 3, 4, method1, method2, method3, method4, auto, general"
 _SUBSTRATE_SD = "substrate_sd must be a positive number (the prior sd of log f, e.g. 0.1 for 10 %) or None, got "
 
 
@@ -211,9 +211,9 @@ _SUBSTRATE_SD = "substrate_sd must be a positive number (the prior sd of log f, 
     ({"seed": -1}, ValueError, "seed must be a non-negative integer, got -1"),
     ({"seed": True}, TypeError, "seed must be a non-negative integer, got bool True"),
     ({"seed": 1.5}, TypeError, "seed must be a non-negative integer, got float 1.5"),
-    ({"method": "method9"}, ValueError, _METHOD + "'method9'"),
-    ({"method": 5}, ValueError, _METHOD + "5"),
-    ({"method": True}, TypeError, _METHOD + "bool True"),
+    ({"method": "method9"}, ValueError, f"unknown method 'method9': method must be one of {_VALID_METHODS}"),
+    ({"method": 5}, ValueError, f"unknown method 5: method must be one of {_VALID_METHODS}"),
+    ({"method": True}, TypeError, f"method must be a method number or name ({_VALID_METHODS}), got bool True"),
     ({"executor": "x"}, TypeError, ("executor must be None (a local pool of 2 processes) or a concurrent.futures-style "
                                    "executor with a submit method (e.g. ProcessPoolExecutor, a dask client's "
                                    "get_executor()), got str 'x'")),

@@ -165,7 +165,7 @@ def test_cli_infer_and_report_with_card_factors(tmp_path, capsys):
     summary = json.loads((tmp_path / "r" / "summary.json").read_text())
     white = next(f for f in summary["substrate_factors"] if f["card"] == str(STATED_WHITE))
     assert white["low"] < TRUE_WHITE / STATED_WHITE < white["high"] and white["relative_sd"] == 0.1
-    assert "r_s = f r_s,card" in (tmp_path / "r" / "report.md").read_text()
+    assert r"r\_s = f r\_s,card" in (tmp_path / "r" / "report.md").read_text()
 
 
 def test_the_old_module_path_still_imports():

@@ -27,7 +27,7 @@ def test_netcdf_round_trip(method4_idata, tmp_path):
 
 
 def test_load_inference_rejects_other_files(tmp_path):
-    with pytest.raises(ValueError, match="no such file"):
+    with pytest.raises(ValueError, match="file not found"):
         load_inference(tmp_path / "missing.nc")
     bad = tmp_path / "bad.nc"
     bad.write_text("not netcdf")

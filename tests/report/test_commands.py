@@ -48,7 +48,7 @@ def test_report_from_the_demo_posterior_with_other_colour_conditions(demo_dir, t
 
 def test_report_of_a_missing_file_is_a_clear_error(tmp_path):
     args = _parser().parse_args(["report", str(tmp_path / "nothing.nc"), "--out", str(tmp_path / "o")])
-    with pytest.raises(ValueError, match="nothing.nc: no such file"):
+    with pytest.raises(ValueError, match="nothing.nc: file not found"):
         args.func(args)
 
 

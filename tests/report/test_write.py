@@ -32,7 +32,7 @@ def test_bad_colour_conditions_are_clear_errors(demo_idata, tmp_path, kwargs, ma
 
 
 def test_bad_inputs_are_clear_errors(tmp_path):
-    with pytest.raises(ValueError, match="no such file"):
+    with pytest.raises(ValueError, match="file not found"):
         write_report(tmp_path / "missing.nc", tmp_path / "out")
     with pytest.raises(ValueError, match="InferenceData"):
         write_report(42, tmp_path / "out")
