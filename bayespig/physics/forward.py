@@ -10,7 +10,7 @@ equivalent to adding the surface to the layer's kernels by the self-consistent
 equation (8) of appendix A1; the substrate enters by the exact substrate law,
 eq. (3). Adding–doubling (:mod:`bayespig.physics.adding_doubling`) with
 :func:`surface_mode` is the cross-check (``solver="doubling"``) and the path for
-nearly conservative layers.
+nearly conservative finite layers.
 
 Angles are in degrees, in air: ``theta_i`` incidence, ``theta_o`` viewing and
 ``delta_phi`` the azimuth between the plane of incidence and the plane of viewing,
@@ -141,7 +141,9 @@ class SurfaceTerms:
     t_up : numpy.ndarray
         Air radiance per unit exitance leaving the substrate, (B, k_out) [1/sr].
     r_up : numpy.ndarray
-        Fraction of the substrate's exitance that returns to it, (B,) [-].
+        Fraction of the substrate's exitance that returns to it, (B,) [-]; 0 for an opaque
+        layer, which never sees its substrate (``t_down = t_up = 0``; a conservative one would
+        return all of it, and ``r_s / (1 - r_s r_up)`` would be 1/0 at ``r_s = 1``).
     h0 : numpy.ndarray
         Directional–hemispherical reflectance over a black substrate, specular
         reflection of the surface excluded, (B, k_in) [-].
@@ -267,6 +269,7 @@ def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=None,
                 out[key][rows, : value.shape[1]] = value
             else:
                 out[key][rows] = value
+    out["r_up"][np.isinf(tau)] = 0.0
     return SurfaceTerms(**out)
 
 
@@ -407,10 +410,11 @@ def surface_mode_eigen(geometry, a, tau, p_reflection, p_transmission, first_mod
     """:func:`surface_mode` without forming the layer's kernels: the discrete-ordinate solution
     with the surface as the top boundary (:func:`~bayespig.physics.discrete_ordinates.radiances_under_surface`).
 
-    Layers with ``a <`` :data:`~bayespig.physics.discrete_ordinates.SMALL_ABSORPTION` (the
-    eigen form degenerates as ``a -> 0``) or ``tau <``
+    Finite layers with ``a <`` :data:`~bayespig.physics.discrete_ordinates.SMALL_ABSORPTION`
+    (the eigen form of a finite layer degenerates as ``a -> 0``) or ``tau <``
     :data:`~bayespig.physics.discrete_ordinates.THIN_LAYER` (its O(1) terms cancel to an
-    O(tau) result) go through doubling and :func:`surface_mode`.
+    O(tau) result) go through doubling and :func:`surface_mode`; opaque layers never do (the
+    eigen form is exact there down to ``a = 0``, where doubling loses ~1e-5 to 1e-4).
 
     Parameters
     ----------
@@ -430,7 +434,7 @@ def surface_mode_eigen(geometry, a, tau, p_reflection, p_transmission, first_mod
         As :func:`mode_terms`.
     """
     gm = geometry
-    doubled = (a < SMALL_ABSORPTION) | (tau < THIN_LAYER)
+    doubled = ((a < SMALL_ABSORPTION) & np.isfinite(tau)) | (tau < THIN_LAYER)
     parts = []
     if doubled.any():
         R, T, direct = layer_mode(gm.mu, gm.weight, a[doubled], tau[doubled], p_reflection, p_transmission,
@@ -551,8 +555,9 @@ def _evaluate(kind, theta_i, theta_o, delta_phi, *, a, tau, g, r_s, n, n_points)
         pair_index = pair_index.ravel()
         thetas_in, in_index = np.unique(flat["theta_i"][sel], return_inverse=True)
         thetas_out, out_index = np.unique(flat["theta_o"][sel], return_inverse=True)
+        # the hemispherical reflectance is the azimuthal mean: mode 0 alone
         terms = surface_terms(thetas_in, thetas_out, a=pairs[:, 0], tau=pairs[:, 1], g=float(g_value), n=n,
-                              n_points=n_points)
+                              n_points=n_points, n_modes=1 if kind == "hemispherical" else None)
         r = flat["r_s"][sel]
         gain = r / (1.0 - r * terms.r_up[pair_index])
         if kind == "brdf":
