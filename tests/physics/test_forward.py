@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import bayespig
-from bayespig.physics import forward
+from bayespig.physics import forward, substrate
 
 #: The coarse quadrature's relative error (~1e-3) on modes below COARSE_AFTER of mode 0, which
 #: keep decaying: measured <= 1.5e-6 of the BRDF for |g| <= 0.8 here (the same under OpenBLAS
@@ -94,6 +94,10 @@ BAD_API_CALLS = [
      "tau must be a real number or an array of real numbers, got '1'"),
     (lambda **kw: bayespig.optical_thickness_from_transmittance(0.5, **kw), {"n": None}, TypeError,
      N_MESSAGE + "None"),
+    (lambda **kw: substrate.substrate_albedo_from_air(0.5, **kw), {"n": "1.45"}, TypeError, N_MESSAGE + "'1.45'"),
+    (lambda **kw: substrate.substrate_albedo_from_air(**kw), {"reflectance_in_air": "0.5"}, TypeError,
+     "reflectance_in_air must be a real number or an array of real numbers, got '0.5'"),
+    (lambda **kw: substrate.clear_binder_brdf(8.0, 45.0, r_s=0.5, **kw), {"n": None}, TypeError, N_MESSAGE + "None"),
     (lambda **kw: bayespig.optical_thickness_from_transmittance(**kw), {"transmittance": 0.95}, ValueError,
      "transmittance must lie in (0, 0.933666] (0 to that of a clear film at n = 1.45), got 0.95"),
 ]
