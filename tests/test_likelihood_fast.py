@@ -14,9 +14,11 @@ from bayespig.data import simulate
 from bayespig.likelihood import ForwardModel, Problem
 from bayespig.table import TableSettings, load_table
 
-#: Two evaluations of the same interpolant summed in different orders: rounding only.
+#: Two evaluations of the same interpolant summed in different orders: rounding only (measured
+#: 0 under OpenBLAS Haswell and SkylakeX).
 SAME_INTERPOLANT_REL_TOL = 1e-12
-#: The stencil's quintic and numpy's fit through the same six values: rounding only.
+#: The stencil's quintic and numpy's fit through the same six values: rounding only (measured
+#: 2.7e-14).
 LOG_IDENTITY_ABS_TOL = 1e-9
 #: A coarse g axis (atanh-uniform, quintic stencil: the defaults) over the default prior range.
 COARSE_G_SETTINGS = TableSettings(

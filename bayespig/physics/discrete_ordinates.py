@@ -28,10 +28,14 @@ Two uses:
   viewing direction follows from integrating the source function along it. No kernel matrix
   is formed; each layer costs one N x N solve per mode.
 
-The conservative limit ``a -> 0`` makes the smallest ``k`` vanish (the diffusion mode, linear
-in ``tau``), where this form degenerates, and in very thin layers its O(1) terms cancel to an
-O(tau) result: such layers (``a <`` :data:`SMALL_ABSORPTION`, ``tau <`` :data:`THIN_LAYER`) go
-through doubling.
+The conservative limit ``a -> 0`` makes the smallest ``k`` vanish (the diffusion mode). A
+semi-infinite layer needs only the decaying solutions, and the reduction of
+:func:`_eigen_solutions` stays regular at ``k = 0``, so opaque layers take this form for every
+``a``, ``a = 0`` included (where doubling's spurious absorption, ~1e-10 per unit ``tau``, costs
+~1e-5 to 1e-4 of the reflectance). In a finite layer the decaying and growing diffusion solutions
+merge as ``k -> 0`` (the missing one is linear in ``tau``), and in very thin layers the O(1)
+terms cancel to an O(tau) result: such finite layers (``a <`` :data:`SMALL_ABSORPTION`,
+``tau <`` :data:`THIN_LAYER`) go through doubling.
 
 References
 ----------
@@ -50,7 +54,7 @@ from .adding_doubling import START_THICKNESS, layer_mode
 __all__ = ["SMALL_ABSORPTION", "THIN_LAYER", "layer_mode_eigen", "radiances_under_surface"]
 
 #: Below this relative absorption the diffusion mode's ``k ~ sqrt(3 a)`` nears 0 and the eigen
-#: form loses accuracy; such layers go through doubling.
+#: form of a finite layer loses accuracy; such finite layers go through doubling.
 SMALL_ABSORPTION = 1e-4
 #: Below this optical thickness the eigen form's O(1) terms cancel to a reflection of O(tau),
 #: losing ~1e-16 / tau of it: such layers go through doubling, whose single-scattering start
@@ -68,17 +72,32 @@ RESONANCE_STEP = 4e-3
 #: Richardson weights of those four rates (error O(STEP^4)).
 RESONANCE_WEIGHTS = np.array([2.0 / 3.0, 2.0 / 3.0, -1.0 / 6.0, -1.0 / 6.0])
 RESONANCE_FACTORS = 1.0 + RESONANCE_STEP * np.array([1.0, -1.0, 2.0, -2.0])
+#: A mode whose ``|C+ S 1|`` is below this (relative to ``|C+|``) conserves energy: its smallest
+#: ``k`` is 0 (:func:`_eigen_solutions`). Measured <= 2e-15 for ``omega = 1`` in mode 0 (|g| <=
+#: 0.95, n 1-1.6, Rayleigh), ~0.2 ``a`` for ``omega = 1 - a`` and >= 0.01 in modes m >= 1; so
+#: only ``a`` below ~5e-14 counts as conservative.
+CONSERVATIVE_RESIDUAL = 1e-14
 
 
 def _eigen_solutions(mu, weight, a, p_reflection, p_transmission):
     """``U``, ``W`` (G, N, N) and ``k`` (G, N) of the decaying solutions for every ``a`` (G,).
 
-    The symmetric reduction (Stamnes & Swanson 1981): with ``S = w^(1/2)`` and the symmetric
-    ``C+- = S (omega/2) (pT +- pR) S - 1``, ``A +- B = M^-1 S^-1 C+- S``, so
-    ``(A - B)(A + B)`` is similar to ``G = L^T M^-1 (-C-) M^-1 L`` with ``-C+ = L L^T``
-    (Cholesky): a symmetric positive definite matrix, whose eigenvectors ``X`` (``eigh``) stay
-    accurate where those of the unsymmetric product do not (high azimuthal modes, grazing
-    nodes). Eigenvectors of ``(A - B)(A + B)``: ``S^-1 L^-T X``.
+    The symmetric reduction (Stamnes & Swanson 1981) of ``D = I+ - I-``, which obeys
+    ``D'' = (A + B)(A - B) D``: with ``S = w^(1/2)`` and the symmetric
+    ``C+- = S (omega/2) (pT +- pR) S - 1``, ``A +- B = M^-1 S^-1 C+- S``, so with
+    ``-C- = L L^T`` (Cholesky) ``(A + B)(A - B)`` is similar to ``G = L^T M^-1 (-C+) M^-1 L``: a
+    symmetric positive semi-definite matrix, whose eigenvectors ``X`` (``eigh``) stay accurate
+    where those of the unsymmetric product do not (high azimuthal modes, grazing nodes).
+    ``-C-`` is positive definite for every albedo (its smallest eigenvalue is ~``1 - omega g``),
+    while ``-C+`` is singular in the conservative mode 0 (its null vector ``S 1`` is the
+    constant radiance, the diffusion mode ``k = 0``). So the reduction holds down to ``a = 0``:
+    with ``y = S^-1 L^-T X`` (``(A + B)(A - B) y = k^2 y``) the solutions are
+    ``Z = I+ + I- = -(A - B) y`` and ``D = k y``, without any division by ``k``.
+
+    In the conservative mode 0 (``omega = 1``; the phase function normalised on the quadrature,
+    :func:`~bayespig.physics.phase.normalise_on_quadrature`) the smallest ``k`` is exactly 0;
+    ``eigh`` returns ``k^2`` with an absolute error ~1e-16 of ``|G|`` (up to 2e-14, a ``k`` of
+    1.4e-7, which would absorb ~5e-6 of the light of an opaque layer), so it is set to 0.
     """
     n = mu.size
     omega = (1.0 - a)[:, None, None]
@@ -86,15 +105,17 @@ def _eigen_solutions(mu, weight, a, p_reflection, p_transmission):
     eye = np.eye(n)
     c_plus = 0.5 * omega * (root_w[:, None] * (p_transmission + p_reflection) * root_w) - eye
     c_minus = 0.5 * omega * (root_w[:, None] * (p_transmission - p_reflection) * root_w) - eye
-    chol = np.linalg.cholesky(-c_plus)  # L, lower
+    chol = np.linalg.cholesky(-c_minus)  # L, lower
     inv_mu = 1.0 / mu
-    g_matrix = np.swapaxes(chol, 1, 2) @ ((inv_mu[:, None] * -c_minus * inv_mu) @ chol)
-    k2, X = np.linalg.eigh(g_matrix)
+    g_matrix = np.swapaxes(chol, 1, 2) @ ((inv_mu[:, None] * -c_plus * inv_mu) @ chol)
+    k2, X = np.linalg.eigh(g_matrix)  # ascending
     k = np.sqrt(np.maximum(k2, 0.0))
-    base = np.linalg.solve(np.swapaxes(chol, 1, 2), X)  # L^-T X
-    Y = -np.linalg.solve(c_minus, mu[:, None] * base * k[:, None, :])  # -(A-B)^-1 V k, scaled
-    V = base / root_w[:, None]
-    Y = Y / root_w[:, None]
+    # the conservative mode 0: C+ S 1 = 0 to rounding
+    null_residual = np.abs(c_plus @ root_w).max(axis=-1) / np.abs(c_plus).max(axis=(1, 2))
+    k[null_residual < CONSERVATIVE_RESIDUAL, 0] = 0.0
+    d = np.linalg.solve(np.swapaxes(chol, 1, 2), X)  # L^-T X = S y
+    V = -(inv_mu[:, None] * (c_minus @ d)) / root_w[:, None]  # -(A - B) y
+    Y = d * k[:, None, :] / root_w[:, None]  # k y
     return 0.5 * (V + Y), 0.5 * (V - Y), k
 
 
@@ -117,7 +138,8 @@ def layer_mode_eigen(mu, weight, a, tau, p_reflection, p_transmission, start_thi
     """Kernels of a homogeneous layer for one azimuthal mode, from the eigen solution.
 
     Same parameters and returns as :func:`bayespig.physics.adding_doubling.layer_mode` (which it
-    calls for ``a <`` :data:`SMALL_ABSORPTION`); one eigen decomposition per distinct ``a``.
+    calls for finite layers with ``a <`` :data:`SMALL_ABSORPTION`); one eigen decomposition per
+    distinct ``a``.
 
     Parameters
     ----------
@@ -152,7 +174,8 @@ def layer_mode_eigen(mu, weight, a, tau, p_reflection, p_transmission, start_thi
     R = np.empty((a.size, n, n))
     T = np.zeros((a.size, n, n))
     direct = np.zeros((a.size, n)) if opaque.all() else np.exp(-tau[:, None] / mu[None, :])
-    small = a < SMALL_ABSORPTION
+    # the opaque limit needs no growing solutions, so the eigen form holds down to a = 0 there
+    small = (a < SMALL_ABSORPTION) & ~opaque
     if small.any():
         R[small], T[small], _ = layer_mode(mu, weight, a[small], tau[small], p_reflection, p_transmission,
                                            start_thickness)
@@ -282,8 +305,8 @@ def radiances_under_surface(mu, weight, a, tau, p_reflection, p_transmission, r_
     mu, weight : numpy.ndarray
         Quadrature nodes and weights, (N_all,), the zero-weight exact directions last [-].
     a, tau : numpy.ndarray
-        Relative absorption in [SMALL_ABSORPTION, 1] and optical thickness, (B,) [-];
-        ``tau`` all finite or all ``inf``.
+        Relative absorption and optical thickness, (B,) [-]; ``tau`` all finite (then ``a`` in
+        [SMALL_ABSORPTION, 1]) or all ``inf`` (then ``a`` in [0, 1]).
     p_reflection, p_transmission : numpy.ndarray
         This mode of the phase function, (N_all, N_all) [-].
     r_top : numpy.ndarray
@@ -304,12 +327,13 @@ def radiances_under_surface(mu, weight, a, tau, p_reflection, p_transmission, r_
     """
     a = np.atleast_1d(np.asarray(a, dtype=float))
     tau = np.atleast_1d(np.asarray(tau, dtype=float))
-    if (a < SMALL_ABSORPTION).any():
-        raise ValueError(f"a must be >= SMALL_ABSORPTION = {SMALL_ABSORPTION} here (use doubling below)")
     opaque = np.isinf(tau)
     if opaque.any() and not opaque.all():
         raise ValueError("tau must be all finite or all infinite in one batch")
     opaque = bool(opaque.all())
+    if not opaque and (a < SMALL_ABSORPTION).any():
+        raise ValueError(f"a must be >= SMALL_ABSORPTION = {SMALL_ABSORPTION} for a finite layer here "
+                         "(use doubling below)")
     n = int(np.count_nonzero(weight))
     if (weight[:n] <= 0).any():
         raise ValueError("zero-weight nodes must follow the quadrature nodes (as binder_quadrature puts them)")

@@ -10,7 +10,7 @@ equivalent to adding the surface to the layer's kernels by the self-consistent
 equation (8) of appendix A1; the substrate enters by the exact substrate law,
 eq. (3). Adding–doubling (:mod:`bayespig.physics.adding_doubling`) with
 :func:`surface_mode` is the cross-check (``solver="doubling"``) and the path for
-nearly conservative layers.
+nearly conservative finite layers.
 
 Angles are in degrees, in air: ``theta_i`` incidence, ``theta_o`` viewing and
 ``delta_phi`` the azimuth between the plane of incidence and the plane of viewing,
@@ -41,10 +41,12 @@ from .quadrature import DEFAULT_QUADRATURE_POINTS, binder_quadrature, default_qu
 __all__ = [
     "SurfaceGeometry",
     "SurfaceTerms",
+    "binder_index",
     "brdf",
     "hemispherical_reflectance",
     "mode_terms",
     "optical_thickness_from_transmittance",
+    "quadrature_points",
     "specular_transmittance",
     "surface_geometry",
     "surface_mode",
@@ -77,13 +79,92 @@ def _blas_controller():
     return ThreadpoolController()
 
 
+def _describe(value):
+    """Short text of an argument's value for an error message."""
+    if isinstance(value, np.ndarray) and value.ndim > 0:
+        return f"an array of dtype {value.dtype} and shape {value.shape}"
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _real_array(name, value):
+    """``value`` as a float array; ``TypeError`` naming ``name`` unless it holds real numbers."""
+    message = f"{name} must be a real number or an array of real numbers, got "
+    if value is None or isinstance(value, (str, bytes)):
+        raise TypeError(message + _describe(value))
+    try:
+        array = np.asarray(value)
+    except ValueError:  # a ragged sequence
+        raise TypeError(message + f"a ragged sequence {_describe(value)}") from None
+    if array.dtype.kind not in "iuf":  # bool, complex, strings, objects
+        raise TypeError(message + _describe(value))
+    return array.astype(float, copy=False)
+
+
+def _first(values, bad):
+    """The first offending element, for the message."""
+    return f"{np.asarray(values)[bad].flat[0]:g}"
+
+
 def _check_finite(name, value):
     if np.isnan(value).any():
         raise ValueError(f"{name} must not be NaN")
 
 
+def binder_index(n):
+    """The binder's refractive index as a float; ``TypeError``/``ValueError`` naming ``n``.
+
+    Parameters
+    ----------
+    n : float
+        Refractive index of the binder, a single finite real number ``>= 1`` [-].
+
+    Returns
+    -------
+    float
+    """
+    message = "n (binder refractive index) must be a finite real number >= 1, got "
+    if n is None or isinstance(n, (str, bytes, bool, np.bool_)):
+        raise TypeError(message + _describe(n))
+    try:
+        value = np.asarray(n)
+    except ValueError:
+        raise TypeError(message + _describe(n)) from None
+    if value.dtype.kind not in "iuf":
+        raise TypeError(message + _describe(n))
+    if value.ndim != 0:
+        raise ValueError(f"n (binder refractive index) must be a single number (one binder per call), "
+                         f"got {_describe(n)}")
+    if not np.isfinite(value) or value < 1.0:
+        raise ValueError(message + f"{float(value):g}")
+    return float(value)
+
+
+def quadrature_points(n_points):
+    """Gauss points per quadrature interval, checked; ``None`` (the default) passes through.
+
+    Parameters
+    ----------
+    n_points : int or None
+        An integer ``>= 2``.
+
+    Returns
+    -------
+    int or None
+    """
+    if n_points is None:
+        return None
+    message = "n_points must be an integer >= 2 (Gauss points per quadrature interval) or None, got "
+    if isinstance(n_points, (bool, np.bool_)) or not isinstance(n_points, (int, np.integer)):
+        raise TypeError(message + _describe(n_points))
+    if n_points < 2:
+        raise ValueError(message + _describe(n_points))
+    return int(n_points)
+
+
 def validate_layer_arguments(*, a, tau, g, r_s, n):
-    """Check the physical parameters of a paint layer; raise ``ValueError`` naming the bad one.
+    """Check the physical parameters of a paint layer; raise ``ValueError`` (a bad value) or
+    ``TypeError`` (not real numbers) naming the bad one.
 
     Parameters
     ----------
@@ -98,28 +179,29 @@ def validate_layer_arguments(*, a, tau, g, r_s, n):
     n : float
         Refractive index of the binder, ``>= 1`` [-].
     """
-    a, tau, g, r_s = (np.asarray(v, dtype=float) for v in (a, tau, g, r_s))
+    a, tau, g, r_s = (_real_array(name, v) for name, v in (("a", a), ("tau", tau), ("g", g), ("r_s", r_s)))
     for name, value in (("a", a), ("tau", tau), ("g", g), ("r_s", r_s)):
         _check_finite(name, value)
-    if ((a < 0) | (a > 1)).any():
-        raise ValueError("a (relative absorption) must lie in [0, 1]")
+    bad = (a < 0) | (a > 1)
+    if bad.any():
+        raise ValueError(f"a (relative absorption) must lie in [0, 1], got {_first(a, bad)}")
     if (tau < 0).any():
-        raise ValueError("tau (optical thickness) must be >= 0")
-    if ((r_s < 0) | (r_s > 1)).any():
-        raise ValueError("r_s (substrate albedo) must lie in [0, 1]")
-    if np.isinf(g).any() or (np.abs(g) == 1.0).any():
-        raise ValueError("g must be finite and not +-1 (|g| > 1 selects Rayleigh)")
-    if not np.isscalar(n) and np.ndim(n) != 0:
-        raise ValueError("n must be a scalar")
-    if not np.isfinite(n) or n < 1.0:
-        raise ValueError("n (binder refractive index) must be a finite number >= 1")
+        raise ValueError(f"tau (optical thickness) must be >= 0, got {_first(tau, tau < 0)}")
+    bad = (r_s < 0) | (r_s > 1)
+    if bad.any():
+        raise ValueError(f"r_s (substrate albedo) must lie in [0, 1], got {_first(r_s, bad)}")
+    bad = np.isinf(g) | (np.abs(g) == 1.0)
+    if bad.any():
+        raise ValueError(f"g must be finite and not +-1 (|g| > 1 selects Rayleigh), got {_first(g, bad)}")
+    binder_index(n)
 
 
 def _validate_angle(name, theta):
-    theta = np.asarray(theta, dtype=float)
+    theta = _real_array(name, theta)
     _check_finite(name, theta)
-    if ((theta < 0) | (theta >= 90)).any():
-        raise ValueError(f"{name} must lie in [0, 90) degrees")
+    bad = (theta < 0) | (theta >= 90)
+    if bad.any():
+        raise ValueError(f"{name} must lie in [0, 90) degrees, got {_first(theta, bad)}")
     return theta
 
 
@@ -141,7 +223,9 @@ class SurfaceTerms:
     t_up : numpy.ndarray
         Air radiance per unit exitance leaving the substrate, (B, k_out) [1/sr].
     r_up : numpy.ndarray
-        Fraction of the substrate's exitance that returns to it, (B,) [-].
+        Fraction of the substrate's exitance that returns to it, (B,) [-]; 0 for an opaque
+        layer, which never sees its substrate (``t_down = t_up = 0``; a conservative one would
+        return all of it, and ``r_s / (1 - r_s r_up)`` would be 1/0 at ``r_s = 1``).
     h0 : numpy.ndarray
         Directional–hemispherical reflectance over a black substrate, specular
         reflection of the surface excluded, (B, k_in) [-].
@@ -217,6 +301,7 @@ def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=None,
     """
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    n, n_points = binder_index(n), quadrature_points(n_points)
     if included_substrate is not None:
         solver = "doubling"
     if n_points is None:
@@ -267,6 +352,7 @@ def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=None,
                 out[key][rows, : value.shape[1]] = value
             else:
                 out[key][rows] = value
+    out["r_up"][np.isinf(tau)] = 0.0
     return SurfaceTerms(**out)
 
 
@@ -407,10 +493,11 @@ def surface_mode_eigen(geometry, a, tau, p_reflection, p_transmission, first_mod
     """:func:`surface_mode` without forming the layer's kernels: the discrete-ordinate solution
     with the surface as the top boundary (:func:`~bayespig.physics.discrete_ordinates.radiances_under_surface`).
 
-    Layers with ``a <`` :data:`~bayespig.physics.discrete_ordinates.SMALL_ABSORPTION` (the
-    eigen form degenerates as ``a -> 0``) or ``tau <``
+    Finite layers with ``a <`` :data:`~bayespig.physics.discrete_ordinates.SMALL_ABSORPTION`
+    (the eigen form of a finite layer degenerates as ``a -> 0``) or ``tau <``
     :data:`~bayespig.physics.discrete_ordinates.THIN_LAYER` (its O(1) terms cancel to an
-    O(tau) result) go through doubling and :func:`surface_mode`.
+    O(tau) result) go through doubling and :func:`surface_mode`; opaque layers never do (the
+    eigen form is exact there down to ``a = 0``, where doubling loses ~1e-5 to 1e-4).
 
     Parameters
     ----------
@@ -430,7 +517,7 @@ def surface_mode_eigen(geometry, a, tau, p_reflection, p_transmission, first_mod
         As :func:`mode_terms`.
     """
     gm = geometry
-    doubled = (a < SMALL_ABSORPTION) | (tau < THIN_LAYER)
+    doubled = ((a < SMALL_ABSORPTION) & np.isfinite(tau)) | (tau < THIN_LAYER)
     parts = []
     if doubled.any():
         R, T, direct = layer_mode(gm.mu, gm.weight, a[doubled], tau[doubled], p_reflection, p_transmission,
@@ -532,15 +619,23 @@ def coarse_quadrature_points(n_points):
     return max(COARSE_MIN_POINTS, n_points // 2)
 
 
-def _as_tuple_broadcast(**arrays):
+def _broadcast_arguments(**arrays):
+    """The arguments broadcast against each other; ``ValueError`` naming two that do not."""
+    arrays = {name: np.asarray(value, dtype=float) for name, value in arrays.items()}
     names = list(arrays)
-    values = np.broadcast_arrays(*(np.asarray(arrays[k], dtype=float) for k in names))
-    return dict(zip(names, values))
+    for i, name in enumerate(names):
+        for other in names[:i]:
+            try:
+                np.broadcast_shapes(arrays[other].shape, arrays[name].shape)
+            except ValueError:
+                raise ValueError(f"{other}, {name}: shapes {arrays[other].shape} and {arrays[name].shape} "
+                                 "do not broadcast") from None
+    return dict(zip(names, np.broadcast_arrays(*arrays.values())))
 
 
 def _evaluate(kind, theta_i, theta_o, delta_phi, *, a, tau, g, r_s, n, n_points):
     """Shared driver of :func:`brdf` and :func:`hemispherical_reflectance`."""
-    args = _as_tuple_broadcast(theta_i=theta_i, theta_o=theta_o, delta_phi=delta_phi, a=a, tau=tau, g=g, r_s=r_s)
+    args = _broadcast_arguments(theta_i=theta_i, theta_o=theta_o, delta_phi=delta_phi, a=a, tau=tau, g=g, r_s=r_s)
     shape = args["a"].shape
     flat = {k: v.ravel() for k, v in args.items()}
     result = np.empty(flat["a"].size)
@@ -551,8 +646,9 @@ def _evaluate(kind, theta_i, theta_o, delta_phi, *, a, tau, g, r_s, n, n_points)
         pair_index = pair_index.ravel()
         thetas_in, in_index = np.unique(flat["theta_i"][sel], return_inverse=True)
         thetas_out, out_index = np.unique(flat["theta_o"][sel], return_inverse=True)
+        # the hemispherical reflectance is the azimuthal mean: mode 0 alone
         terms = surface_terms(thetas_in, thetas_out, a=pairs[:, 0], tau=pairs[:, 1], g=float(g_value), n=n,
-                              n_points=n_points)
+                              n_points=n_points, n_modes=1 if kind == "hemispherical" else None)
         r = flat["r_s"][sel]
         gain = r / (1.0 - r * terms.r_up[pair_index])
         if kind == "brdf":
@@ -600,15 +696,25 @@ def brdf(theta_i, theta_o, delta_phi, *, a, tau, g=0.0, r_s=0.0, n=1.45, n_point
     numpy.ndarray
         BRDF [1/sr], the arguments broadcast against each other.
 
+    Raises
+    ------
+    TypeError
+        An argument that is not real numbers (``n``: not one real number; ``n_points``: not an
+        integer), naming it.
+    ValueError
+        A value out of range, or two arguments whose shapes do not broadcast, naming them.
+
     References
     ----------
     Ershov, Voloboy & Pozdnyakov (2023), eqs. (1)-(3), (8).
     """
     validate_layer_arguments(a=a, tau=tau, g=g, r_s=r_s, n=n)
+    n, n_points = binder_index(n), quadrature_points(n_points)
     theta_i = _validate_angle("theta_i", theta_i)
     theta_o = _validate_angle("theta_o", theta_o)
-    _check_finite("delta_phi", np.asarray(delta_phi, dtype=float))
-    if np.isinf(np.asarray(delta_phi, dtype=float)).any():
+    delta_phi = _real_array("delta_phi", delta_phi)
+    _check_finite("delta_phi", delta_phi)
+    if np.isinf(delta_phi).any():
         raise ValueError("delta_phi must be finite")
     return _evaluate("brdf", theta_i, theta_o, delta_phi, a=a, tau=tau, g=g, r_s=r_s, n=n, n_points=n_points)
 
@@ -630,10 +736,16 @@ def hemispherical_reflectance(theta_i, *, a, tau, g=0.0, r_s=0.0, n=1.45, specul
     -------
     numpy.ndarray
         Reflectance [-].
+
+    Raises
+    ------
+    TypeError, ValueError
+        As :func:`brdf`.
     """
     if specular not in ("excluded", "included"):
         raise ValueError(f"specular must be 'excluded' or 'included', got {specular!r}")
     validate_layer_arguments(a=a, tau=tau, g=g, r_s=r_s, n=n)
+    n, n_points = binder_index(n), quadrature_points(n_points)
     theta_i = _validate_angle("theta_i", theta_i)
     diffuse = _evaluate("hemispherical", theta_i, theta_i, 0.0, a=a, tau=tau, g=g, r_s=r_s, n=n,
                         n_points=n_points)
@@ -659,11 +771,11 @@ def specular_transmittance(tau, n=1.45):
     numpy.ndarray
         Transmittance [-].
     """
-    tau = np.asarray(tau, dtype=float)
+    tau = _real_array("tau", tau)
     _check_finite("tau", tau)
     if (tau < 0).any():
-        raise ValueError("tau (optical thickness) must be >= 0")
-    return normal_transmittance(n) ** 2 * np.exp(-tau)
+        raise ValueError(f"tau (optical thickness) must be >= 0, got {_first(tau, tau < 0)}")
+    return normal_transmittance(binder_index(n)) ** 2 * np.exp(-tau)
 
 
 def optical_thickness_from_transmittance(transmittance, n=1.45):
@@ -681,8 +793,11 @@ def optical_thickness_from_transmittance(transmittance, n=1.45):
     numpy.ndarray
         Optical thickness [-].
     """
-    transmittance = np.asarray(transmittance, dtype=float)
+    transmittance = _real_array("transmittance", transmittance)
     _check_finite("transmittance", transmittance)
-    if (transmittance <= 0).any():
-        raise ValueError("transmittance must be > 0")
-    return -np.log(transmittance / normal_transmittance(n) ** 2)
+    clear = normal_transmittance(binder_index(n)) ** 2
+    bad = (transmittance <= 0) | (transmittance > clear)
+    if bad.any():
+        raise ValueError(f"transmittance must lie in (0, {clear:.6g}] (0 to that of a clear film at n = {n:g}), "
+                         f"got {_first(transmittance, bad)}")
+    return -np.log(transmittance / clear)

@@ -28,6 +28,10 @@ __all__ = [
 
 #: Relative size below which a Fourier mode of the phase function is dropped.
 FOURIER_TOLERANCE = 1e-7
+#: Iterations of :func:`normalise_on_quadrature`: 20 left the discrete mode 0 short of 2 by up to
+#: 6e-13 at g = 0.95 (a spurious absorption that costs an opaque conservative layer ~7e-6 of its
+#: reflectance); 30 reach rounding (<= 2e-15) for |g| <= 0.95 on the default quadratures.
+NORMALISATION_ITERATIONS = 40
 
 
 def henyey_greenstein(cos_theta, g):
@@ -131,7 +135,7 @@ def phase_fourier_modes(mu_out, mu_in, g, n_modes, *, reflection):
     return modes
 
 
-def normalise_on_quadrature(p_reflection, p_transmission, weight, n_iterations=20):
+def normalise_on_quadrature(p_reflection, p_transmission, weight, n_iterations=NORMALISATION_ITERATIONS):
     """Rescale phase-function modes so the discrete mode 0 integrates to exactly 2.
 
     A sharply peaked Henyey–Greenstein law is not integrated exactly by a modest

@@ -11,7 +11,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .forward import _validate_angle, surface_terms, validate_layer_arguments
+from .forward import (
+    _real_array,
+    _validate_angle,
+    binder_index,
+    surface_terms,
+    validate_layer_arguments,
+)
 from .fresnel import fresnel_reflectance, internal_diffuse_reflectance
 
 __all__ = [
@@ -150,9 +156,10 @@ def substrate_albedo_from_air(reflectance_in_air, *, n=1.45, kind="hemispherical
         ``r_s`` [-], clipped to [0, 1] only if within 1e-9 of it; otherwise a
         value outside raises ``ValueError``.
     """
-    x = np.asarray(reflectance_in_air, dtype=float)
+    x = _real_array("reflectance_in_air", reflectance_in_air)
     if np.isnan(x).any():
         raise ValueError("reflectance_in_air must not be NaN")
+    n = binder_index(n)
     r_i = internal_diffuse_reflectance(n)
     r_F = fresnel_reflectance(np.cos(np.radians(_validate_angle("theta_i", theta_i))), 1.0, n)
     if kind == "hemispherical":
