@@ -30,13 +30,10 @@ from __future__ import annotations
 
 import datetime
 import json
-import os
 import platform
-import signal
 import sys
 import time
 from collections.abc import Iterable
-from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,6 +42,7 @@ import numpy as np
 
 from .. import __version__
 from .._atomic import atomic_path, write_text_atomically
+from .._pool import local_pool, stop_pool
 from ..data.model import BLACK_SUBSTRATE_ALBEDO, WHITE_SUBSTRATE_ALBEDO
 from ..data.simulate import DESIGNS
 from ..fit import FitSettings, film_term, fit_batch
@@ -495,23 +493,13 @@ def _run_case(case):
 _COST = {"method3": 4, "method4": 2, "method2": 2, "method1": 1}
 
 
-def _ignore_interrupts():
-    """Worker initializer: Ctrl-C is the parent's to handle (it cancels the cases and says so once)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-def _local_pool():
-    """A local pool of 2 processes whose workers leave Ctrl-C to the parent."""
-    return ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1), initializer=_ignore_interrupts)
-
-
 def _stop_pool(pool, interrupted):
     """Shut a local pool down; after Ctrl-C without waiting for the running cases (their
     workers are terminated: nothing of theirs is kept)."""
     if interrupted:
-        for process in list((getattr(pool, "_processes", None) or {}).values()):
-            process.terminate()
-    pool.shutdown(cancel_futures=True)
+        stop_pool(pool)
+    else:
+        pool.shutdown(cancel_futures=True)
 
 
 @contextmanager
@@ -520,7 +508,7 @@ def _executor_or_local(executor, n_cases):
     if executor is not None or n_cases < 2:
         yield executor
         return
-    pool = _local_pool()
+    pool = local_pool()
     try:
         yield pool
     except KeyboardInterrupt:
@@ -1052,7 +1040,7 @@ def write_paper_tables(
         studies["escape"] = (("method2", "method4"), PAPER_A0, (2.0,), escape_repeats, instrument, None)
     total = sum(len(m) * len(a) * len(t) * repeats for m, a, t, repeats, _, _ in studies.values())
     own = executor is None
-    pool = _local_pool() if own else executor
+    pool = local_pool() if own else executor
     bar = _progress_bar(total, progress)
     grids, interrupted = {}, False
     try:
