@@ -107,10 +107,10 @@ def test_inferred_eps_and_floor_are_the_last_two_parameters(method3):
 
 
 @pytest.mark.parametrize("value, error, message", [
-    ("estimate", ValueError, "noise_floor must be None (no floor), a number >= 0 (the additive noise floor in "
-                             "the units of the values, e.g. 0.001 for 0.001 1/sr) or 'infer', got 'estimate'"),
-    (-1e-3, ValueError, "noise_floor must be None (no floor), a number >= 0 (the additive noise floor in "
-                        "the units of the values, e.g. 0.001 for 0.001 1/sr) or 'infer', got -0.001"),
+    ("estimate", ValueError, ("noise_floor must be None (no floor), a number >= 0 (the additive noise floor in "
+                             "the units of the values, e.g. 0.001 for 0.001 1/sr) or 'infer', got 'estimate'")),
+    (-1e-3, ValueError, ("noise_floor must be None (no floor), a number >= 0 (the additive noise floor in "
+                        "the units of the values, e.g. 0.001 for 0.001 1/sr) or 'infer', got -0.001")),
     (float("nan"), ValueError, "got nan"),
     (True, TypeError, "got bool True"),
     ([1e-3], TypeError, "got list [0.001]"),

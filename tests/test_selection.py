@@ -85,10 +85,10 @@ def test_substrate_samples_keep_every_geometry():
 
 @pytest.mark.parametrize("kwargs, message", [
     ({"exclude_mirror_deg": 5.0, "max_angle_deg": 10.0},
-     "the mirror cone of 5° and max angle 10° leave no geometry of film 'gonio' (it has 7: 45/45/179, "
-     "45as5, 45as25, 45as45, 30as-45, 80as90, ...)"),
-    ({"exclude_mirror_deg": 120.0}, "the mirror cone of 120° leaves no geometry of film 'gonio' (it has 7: "
-                                    "45/45/179, 45as5, 45as25, 45as45, 30as-45, 80as90, ...)"),
+     ("the mirror cone of 5° and max angle 10° leave no geometry of film 'gonio' (it has 7: 45/45/179, "
+     "45as5, 45as25, 45as45, 30as-45, 80as90, ...)")),
+    ({"exclude_mirror_deg": 120.0}, ("the mirror cone of 120° leaves no geometry of film 'gonio' (it has 7: "
+                                    "45/45/179, 45as5, 45as25, 45as45, 30as-45, 80as90, ...)")),
     ({"wavelengths": [450.0, 600.0]}, "wavelengths 600 nm are not measured (the set has 3 bands, 450–550 nm)"),
     ({"wavelength_range": (600, 700)}, "wavelength_range 600–700 nm leaves no band of the set (450–550 nm)"),
     ({"wavelength_range": (600, 500)}, "wavelength_range must be (low, high) with low <= high [nm], got (600, 500)"),
