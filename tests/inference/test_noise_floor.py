@@ -8,7 +8,7 @@ import pytest
 from scipy import stats
 
 from bayespig.data import MeasurementSet, simulate
-from bayespig.inference import infer, load_inference, save_inference
+from bayespig.inference import diagnose, infer, load_inference, save_inference, summarize
 from bayespig.report.quantities import posterior_predictive_check
 
 from .common import FAST
@@ -181,3 +181,11 @@ def test_saved_and_reloaded_floor(floored_idata, tmp_path):
     np.testing.assert_array_equal(loaded.posterior["noise_floor"].values, floored_idata.posterior["noise_floor"].values)
     check = posterior_predictive_check(loaded)
     np.testing.assert_allclose(check["chi2"], posterior_predictive_check(floored_idata)["chi2"], rtol=1e-12)
+
+
+def test_summary_and_diagnostics_include_the_floor(floored_idata):
+    summary = summarize(floored_idata)
+    np.testing.assert_allclose(summary["noise_floor_mean"], floored_idata.posterior["noise_floor"].mean(("chain", "draw")),
+                               rtol=1e-12)
+    assert (summary["noise_floor_r_hat"] < 1.01).all()
+    assert diagnose(floored_idata, warn=False) == []
