@@ -9,7 +9,13 @@ import warnings
 
 import numpy as np
 
-from ..likelihood import ForwardModel, LogPosterior, Problem, check_observed
+from ..likelihood import (
+    ForwardModel,
+    LogPosterior,
+    Problem,
+    check_observed,
+    multiplicative_normal_logpdf,
+)
 from ..selection import select_measurements
 from .arguments import (
     check_executor,
@@ -123,9 +129,9 @@ def _noise_starts(problem, model, fit, priors, log_post0):
         m = model.predict(index, fit.a[index:index + 1], fit.tau[index:index + 1], 0.0)[0]
         x = problem.observed(index)
         eps = np.where(unknown[None, :], E.ravel()[:, None], eps_known[None, :])
-        logpdf = -0.5 * ((x - m) ** 2 / ((eps * m) ** 2 + F.ravel()[:, None] ** 2)
-                         + np.log((eps * m) ** 2 + F.ravel()[:, None] ** 2))
-        best = int(np.argmax(logpdf.sum(axis=1)))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            logpdf = multiplicative_normal_logpdf(x, m, eps, F.ravel()[:, None]).sum(axis=1)
+        best = int(np.argmax(np.where(np.isfinite(logpdf), logpdf, -np.inf)))
         row = []
         if log_post0.infer_eps:
             row.append(np.log(E.ravel()[best]))
