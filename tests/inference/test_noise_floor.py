@@ -189,3 +189,19 @@ def test_summary_and_diagnostics_include_the_floor(floored_idata):
                                rtol=1e-12)
     assert (summary["noise_floor_r_hat"] < 1.01).all()
     assert diagnose(floored_idata, warn=False) == []
+
+
+def test_ravine_holds_the_inferred_floor(floored_idata):
+    """The ravine figure's landscape is the floored likelihood with eps and the floor at their medians."""
+    from bayespig.likelihood import ForwardModel
+    from bayespig.report.quantities import problem_from_inference, ravine
+
+    surface = ravine(floored_idata, 1, n_grid=9)
+    eps = float(np.median(floored_idata.posterior["eps"].values[..., 1]))
+    floor = float(np.median(floored_idata.posterior["noise_floor"].values[..., 1]))
+    assert surface.held == {"eps": pytest.approx(eps, rel=1e-12), "noise_floor": pytest.approx(floor, rel=1e-12)}
+    row, column = np.unravel_index(np.argmax(surface.log_likelihood), surface.log_likelihood.shape)
+    problem = problem_from_inference(floored_idata)
+    m = ForwardModel(problem).predict(1, np.array([surface.a[column]]), np.array([[surface.tau[row]]]))[0]
+    expected = stats.norm.logpdf(problem.observed(1), loc=m, scale=np.sqrt((eps * m) ** 2 + floor ** 2)).sum()
+    assert surface.log_likelihood[row, column] == pytest.approx(expected, rel=1e-8)
