@@ -319,8 +319,11 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     Raises
     ------
     TypeError, ValueError
-        For an argument of the wrong kind or value (the message names it), and for
-        ``eps="infer"`` where a wavelength has no more values than parameters.
+        For an argument of the wrong kind or value (the message names it), for
+        ``eps="infer"`` (or ``noise_floor="infer"``) where a wavelength has no more values than
+        parameters, for an observed value the noise model cannot take (NaN or infinite; 0
+        without a noise floor; negative), naming film, band and geometry, and for a selection
+        that leaves a film without geometries or the set without bands.
     ValueError, MeasurementError
         For a file that cannot be read or a method the samples do not support.
     KeyboardInterrupt
