@@ -1,20 +1,41 @@
-"""Likelihoods: the paper's multiplicative noise model over any set of samples, and priors.
+"""Likelihoods: the paper's multiplicative noise model with an additive floor, over any set of samples, and priors.
 
 Every measured value is ``x_obs = x_true (1 + eps xi)``, ``xi ~ N(0, 1)`` (paper eq. 7),
 so the exact likelihood of one value is ``N(x_obs | x_model, (eps x_model)^2)``:
 
     log L = -1/2 ((x_obs - x_model) / (eps x_model))^2 - log(eps x_model) - 1/2 log(2 pi)
 
+Real instruments (gonioreflectometers above all) also have an additive noise floor: a
+reading of a dark direction is ``x_obs = x_true (1 + eps xi) + sigma0 zeta`` with ``zeta ~
+N(0, 1)`` independent of ``xi`` (detector and stray-light noise that does not scale with the
+signal). The sum of two independent zero-mean Gaussians is Gaussian with the summed
+variances, so
+
+    x_obs ~ N(x_model, sigma^2),   sigma^2 = (eps x_model)^2 + sigma0^2,
+    log L = -1/2 (x_obs - x_model)^2 / sigma^2 - 1/2 log(sigma^2) - 1/2 log(2 pi)
+
+(:func:`multiplicative_normal_logpdf`). ``sigma0`` (the *noise floor*) is in the units of
+the value: 1/sr for a BRDF, a fraction for hemispherical reflectances, 45°/0° reflectance
+factors and transmittances. At ``sigma0 = 0`` this is eq. (7) exactly (``hypot(x, 0) = |x|``
+in floating point). With ``sigma0 > 0`` an observed zero, or a value far below the model,
+has a finite likelihood: zeros and near-zero readings are data. Observed values must then be
+``>= 0`` (bayespig's measurement model refuses negative readings, and an instrument that
+clips its readings at 0 reports exact zeros, which the Gaussian density at 0 describes to
+within the floor); without a floor they must be ``> 0`` (eq. 7 gives an observed 0 the
+likelihood 0 for any model value). NaN and infinite values are refused either way
+(:func:`check_observed`, naming film, value and band). The model value must be ``> 0``.
+
 A :class:`Problem` is what a measurement set says about one pigment: for every film
 its instrument, substrate albedo ``r_s(λ)``, whether it is opaque, which films
 share ``tau`` (film groups), and the observed values. The paper's methods 1–4
 (section 3) are subsets of samples; the general case is all of them. Parameters
 per wavelength are ``a`` (pigment), one ``tau`` per film group, optionally ``g``
-(pigment) and ``eps`` (shared by the samples of that wavelength).
+(pigment), ``eps`` and the noise floor (each shared by the samples of that wavelength).
 """
 
 from __future__ import annotations
 
+import numbers
 import os
 from dataclasses import dataclass, field
 
@@ -32,8 +53,11 @@ __all__ = [
     "Priors",
     "Problem",
     "WavelengthModel",
+    "check_observed",
     "method_name",
     "multiplicative_normal_logpdf",
+    "noise_floor_argument",
+    "noise_sd",
 ]
 
 #: The paper's methods, in the order ``method="auto"`` prefers them (paper section 4.2:
@@ -85,8 +109,33 @@ def method_name(method, *, also=("auto", "general"), argument="method"):
     return PAPER_METHOD_SPELLINGS[key]
 
 
-def multiplicative_normal_logpdf(observed, model, eps):
-    """Log-density of the paper's noise model (eq. 7), per value.
+def noise_sd(model, eps, noise_floor=0.0):
+    """Standard deviation of a measured value: ``sqrt((eps model)^2 + noise_floor^2)``.
+
+    Parameters
+    ----------
+    model : array_like
+        Noise-free predicted values (units of the measurement: 1/sr for BRDF, a fraction
+        for reflectances and transmittances).
+    eps : array_like
+        Relative measurement error of eq. (7) [-].
+    noise_floor : array_like
+        Additive noise floor ``sigma0`` [units of the values]; 0 gives ``eps * model``
+        exactly.
+
+    Returns
+    -------
+    numpy.ndarray
+        Broadcast.
+    """
+    return np.hypot(np.multiply(eps, model), noise_floor)
+
+
+def multiplicative_normal_logpdf(observed, model, eps, noise_floor=0.0):
+    """Log-density of the paper's noise model (eq. 7), with an optional additive floor, per value.
+
+    ``log N(observed | model, sigma^2)`` with ``sigma^2 = (eps model)^2 + noise_floor^2``
+    (see the module docstring for the derivation); ``noise_floor = 0`` is eq. (7) exactly.
 
     Parameters
     ----------
@@ -94,20 +143,106 @@ def multiplicative_normal_logpdf(observed, model, eps):
         Measured and predicted values (same units; ``model > 0``).
     eps : array_like
         Relative measurement error [-].
+    noise_floor : array_like
+        Additive noise floor ``sigma0`` in the units of the values (1/sr for a BRDF, a
+        fraction for hemispherical values) [default 0].
 
     Returns
     -------
     numpy.ndarray
-        ``log N(observed | model, (eps model)^2)``, broadcast.
+        ``log N(observed | model, (eps model)^2 + noise_floor^2)``, broadcast.
+
+    References
+    ----------
+    Ershov, Voloboy & Pozdnyakov (2023), eq. (7).
     """
     try:
-        sigma = eps * model
+        sigma = noise_sd(model, eps, noise_floor)
         return -0.5 * ((observed - model) / sigma) ** 2 - np.log(sigma) - 0.5 * _LOG_2PI
     except (TypeError, ValueError):  # checked only on failure: this runs in the sampler's loop
         checked = {name: real_array(name, value) for name, value in
-                   (("observed", observed), ("model", model), ("eps", eps))}
+                   (("observed", observed), ("model", model), ("eps", eps), ("noise_floor", noise_floor))}
         broadcast(**checked)
         raise
+
+
+def noise_floor_argument(noise_floor, name="noise_floor"):
+    """``noise_floor`` checked: None (no floor), a finite number >= 0, or ``"infer"``.
+
+    Returns
+    -------
+    None, float or "infer"
+        None for no floor (None or 0: the multiplicative model of eq. 7), the known floor
+        ``sigma0 > 0`` [units of the values], or ``"infer"``.
+
+    Raises
+    ------
+    TypeError, ValueError
+        Naming ``name``, for anything else.
+    """
+    expected = ("None (no floor), a number >= 0 (the additive noise floor in the units of the values, "
+                "e.g. 0.001 for 0.001 1/sr) or 'infer'")
+    if noise_floor is None:
+        return None
+    if isinstance(noise_floor, str):
+        if noise_floor != "infer":
+            raise ValueError(f"{name} must be {expected}, got {noise_floor!r}")
+        return "infer"
+    if isinstance(noise_floor, (bool, np.bool_)) or not isinstance(noise_floor, numbers.Real):
+        raise TypeError(f"{name} must be {expected}, got {type(noise_floor).__name__} {noise_floor!r}")
+    value = float(noise_floor)
+    if not (np.isfinite(value) and value >= 0):
+        raise ValueError(f"{name} must be {expected}, got {noise_floor!r}")
+    return value if value > 0 else None
+
+
+def _value_names(film):
+    """Geometry label of every value of a film (its instrument's channels)."""
+    if film.kind == "transmittance" or film.instrument is None:
+        return ["specular transmittance"] * film.observed.shape[1]
+    return list(film.instrument.labels)
+
+
+def check_observed(problem, noise_floor=None):
+    """Refuse observed values the noise model cannot take, naming film, value and band.
+
+    NaN and infinite values are always refused; without a noise floor every value must be
+    ``> 0`` (eq. 7 gives an observed 0 zero likelihood), with a floor (known or inferred)
+    ``>= 0`` (see the module docstring).
+
+    Parameters
+    ----------
+    problem : Problem
+    noise_floor : None, float or "infer"
+        As from :func:`noise_floor_argument`.
+
+    Raises
+    ------
+    ValueError
+        For the first offending value: ``film 'x': observed value 0 at 450 nm, geometry
+        30as20 (value 3 of 12) ...``.
+    """
+    wavelength = np.asarray(problem.wavelength_nm, dtype=float)
+    floor = noise_floor is not None
+    for film in problem.films:
+        observed = np.asarray(film.observed, dtype=float)
+        bad_finite = ~np.isfinite(observed)
+        bad = bad_finite | ((observed < 0) if floor else (observed <= 0))
+        if not bad.any():
+            continue
+        row, column = (int(v[0]) for v in np.nonzero(bad))
+        value = observed[row, column]
+        count = int(bad.sum())
+        where = (f"film {film.name!r}: observed value {value:g} at {wavelength[row]:g} nm, geometry "
+                 f"{_value_names(film)[column]} (value {column + 1} of {observed.shape[1]})")
+        more = f"; {count - 1} more value{'s' if count > 2 else ''} of this film as well" if count > 1 else ""
+        if bad_finite[row, column]:
+            raise ValueError(f"{where} is not a finite number{more}")
+        if floor:
+            raise ValueError(f"{where} is negative; measured values must be >= 0{more}")
+        raise ValueError(f"{where} must be > 0 without a noise floor (eq. 7 gives a zero reading zero "
+                         f"likelihood){more}; give noise_floor=<number> or 'infer' "
+                         "(--noise-floor on the command line) to take zeros as data")
 
 
 @dataclass(frozen=True)
@@ -244,8 +379,12 @@ class Priors:
     """Prior ranges (stated in every report).
 
     ``a`` uniform on ``a_range``; each ``tau`` log-uniform on ``tau_range``; ``g``
-    uniform on ``g_range`` when free; ``eps`` log-uniform on ``eps_range`` when inferred.
-    In the sampled coordinates ``[a, log tau, g, log eps]`` every prior is flat on a box.
+    uniform on ``g_range`` when free; ``eps`` log-uniform on ``eps_range`` when inferred;
+    the additive noise floor ``sigma0`` log-uniform on ``noise_floor_range`` when inferred
+    (in the units of the values: 1/sr for BRDF, a fraction for hemispherical values; the
+    default 1e-6 .. 1 spans a floor far below any paint's BRDF to one above the brightest
+    diffuse body, ~0.3 1/sr). In the sampled coordinates ``[a, log tau, g, log eps, log
+    sigma0]`` every prior is flat on a box.
 
     Raises
     ------
@@ -257,10 +396,12 @@ class Priors:
     tau_range: tuple = (0.01, 100.0)
     g_range: tuple = (-0.5, 0.8)
     eps_range: tuple = (1e-3, 0.5)
+    noise_floor_range: tuple = (1e-6, 1.0)
 
     def __post_init__(self):
         domains = {"a_range": (0.0, 1.0, True), "tau_range": (0.0, np.inf, False),
-                   "g_range": (-1.0, 1.0, False), "eps_range": (0.0, np.inf, False)}
+                   "g_range": (-1.0, 1.0, False), "eps_range": (0.0, np.inf, False),
+                   "noise_floor_range": (0.0, np.inf, False)}
         for name, (low, high, closed) in domains.items():
             try:
                 lo, hi = (float(v) for v in getattr(self, name))
@@ -279,6 +420,8 @@ class Priors:
             "tau": f"log-uniform on [{self.tau_range[0]:g}, {self.tau_range[1]:g}]",
             "g": f"uniform on [{self.g_range[0]:g}, {self.g_range[1]:g}] (when free)",
             "eps": f"log-uniform on [{self.eps_range[0]:g}, {self.eps_range[1]:g}] (when inferred)",
+            "noise_floor": (f"log-uniform on [{self.noise_floor_range[0]:g}, {self.noise_floor_range[1]:g}] "
+                            "in the units of the values (when inferred)"),
         }
 
 
@@ -547,10 +690,11 @@ class LogPosterior:
     wavelengths share the parameter layout, priors and known errors; only the observed
     values and the substrate albedos differ.
 
-    Parameters are ``[a, log tau_1, ..., log tau_G, (g), (log eps)]``: with the
-    priors of :class:`Priors` the density is flat in every sampled coordinate on a
-    box, so the log-posterior equals the log-likelihood of eq. (7) inside the box
-    (up to the prior's normalising constant) and ``-inf`` outside.
+    Parameters are ``[a, log tau_1, ..., log tau_G, (g), (log eps), (log noise_floor)]``:
+    with the priors of :class:`Priors` the density is flat in every sampled coordinate on a
+    box, so the log-posterior equals the log-likelihood of eq. (7) (with the additive floor
+    when there is one, see the module docstring) inside the box (up to the prior's
+    normalising constant) and ``-inf`` outside.
 
     Parameters
     ----------
@@ -563,19 +707,25 @@ class LogPosterior:
     eps : float or None
         Known relative error for films without their own; None infers one ``eps``
         (shared by the samples of this wavelength) for the films without their own.
+    noise_floor : None, float or "infer"
+        Additive noise floor ``sigma0`` of every value [units of the values]: None or 0 for
+        none (eq. 7 alone, the exact code path of before), a known number, or ``"infer"``:
+        one floor per wavelength shared by all its values, log-uniform on
+        ``priors.noise_floor_range``.
 
     References
     ----------
     Ershov, Voloboy & Pozdnyakov (2023), eq. (7) (noise model).
     """
 
-    def __init__(self, model, index, priors=Priors(), g="isotropic", eps=0.05):
+    def __init__(self, model, index, priors=Priors(), g="isotropic", eps=0.05, noise_floor=None):
         if g not in ("isotropic", "free"):
             raise ValueError(f"g must be 'isotropic' or 'free', got {g!r}")
         if g == "free" and model.g != "free":
             raise ValueError("g='free' needs a ForwardModel with g='free' (tables with a g axis)")
         if eps is not None and not (np.isfinite(eps) and eps > 0):
             raise ValueError(f"eps must be a positive number or None (inferred), got {eps!r}")
+        noise_floor = noise_floor_argument(noise_floor)
         for table in model.film_tables:
             if table is None:
                 continue
@@ -605,6 +755,12 @@ class LogPosterior:
             names.append("g")
         if self.infer_eps:
             names.append("log_eps")
+        self.infer_noise_floor = noise_floor == "infer"
+        #: Known floor [units of the values], 0.0 for none or when inferred.
+        self.noise_floor = 0.0 if noise_floor in (None, "infer") else float(noise_floor)
+        self.has_noise_floor = noise_floor is not None
+        if self.infer_noise_floor:
+            names.append("log_noise_floor")
         self.parameter_names = tuple(names)
         low = [priors.a_range[0]] + [np.log(priors.tau_range[0])] * self.n_groups
         high = [priors.a_range[1]] + [np.log(priors.tau_range[1])] * self.n_groups
@@ -614,6 +770,9 @@ class LogPosterior:
         if self.infer_eps:
             low.append(np.log(priors.eps_range[0]))
             high.append(np.log(priors.eps_range[1]))
+        if self.infer_noise_floor:
+            low.append(np.log(priors.noise_floor_range[0]))
+            high.append(np.log(priors.noise_floor_range[1]))
         self.lower = np.array(low)
         self.upper = np.array(high)
 
@@ -645,6 +804,14 @@ class LogPosterior:
             eps = self.eps[None, :]
         return a, tau, g, eps
 
+    def noise_floor_of(self, theta):
+        """The noise floor of each parameter vector, shape (n,) [units of the values] (the
+        known one, or 0, when it is not inferred)."""
+        theta = np.atleast_2d(theta)
+        if self.infer_noise_floor:
+            return np.exp(theta[:, -1])
+        return np.full(theta.shape[0], self.noise_floor)
+
     def in_support(self, theta):
         """Boolean mask of parameter vectors inside the prior's support."""
         theta = np.atleast_2d(theta)
@@ -652,6 +819,9 @@ class LogPosterior:
 
     def log_likelihood(self, theta, pointwise=False, member=None):
         """Log-likelihood of eq. (7) per parameter vector (``-inf`` outside the support).
+
+        With a noise floor, that of :func:`multiplicative_normal_logpdf` with the floor (the
+        variance ``(eps m)^2 + sigma0^2``); without one the code path of eq. (7) alone.
 
         With ``pointwise=True`` the terms per measured value, shape (n, n_values).
         ``member`` (n,) is the stack position of every row (required for a stack).
@@ -677,12 +847,22 @@ class LogPosterior:
                 log_eps_free = inside[:, k + self.free_g][:, None]
                 inv_eps = np.where(self._unknown, np.exp(-log_eps_free), inv_eps)
                 log_eps = log_eps + log_eps_free * self._unknown
-            z = (observed / model - 1.0) * inv_eps
-            if pointwise:
-                value = -0.5 * z * z - np.log(model) - log_eps - 0.5 * _LOG_2PI
+            if self.has_noise_floor:
+                # N(x | m, (eps m)^2 + sigma0^2); the model value must stay > 0
+                floor = np.exp(inside[:, -1])[:, None] if self.infer_noise_floor else self.noise_floor
+                variance = (model * np.exp(log_eps)) ** 2 + floor * floor
+                residual = observed - model
+                value = -0.5 * (residual * residual / variance + np.log(variance) + _LOG_2PI)
+                value = np.where(model > 0, value, -np.inf)
+                if not pointwise:
+                    value = value.sum(axis=1)
             else:
-                value = (-0.5 * (z * z).sum(axis=1) - np.log(model).sum(axis=1)
-                         - (log_eps.sum(axis=-1) + 0.5 * _LOG_2PI * z.shape[1]))
+                z = (observed / model - 1.0) * inv_eps
+                if pointwise:
+                    value = -0.5 * z * z - np.log(model) - log_eps - 0.5 * _LOG_2PI
+                else:
+                    value = (-0.5 * (z * z).sum(axis=1) - np.log(model).sum(axis=1)
+                             - (log_eps.sum(axis=-1) + 0.5 * _LOG_2PI * z.shape[1]))
         value[~np.isfinite(value)] = -np.inf
         if everywhere:
             return value

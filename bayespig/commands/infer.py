@@ -51,6 +51,16 @@ def add_infer_parser(subparsers):
     parser.add_argument("--eps", default=None,
                         help="relative measurement error of eq. (7), a number or 'infer' (default: the "
                              "file's eps, else 0.05)")
+    parser.add_argument("--noise-floor", default=None,
+                        help="additive noise floor of every value, in the values' units (1/sr for BRDF): a "
+                             "number >= 0 or 'infer' (one per wavelength); with a floor, zero readings are data "
+                             "(default: none, eq. 7 alone)")
+    parser.add_argument("--exclude-mirror", type=float, default=None, metavar="DEG",
+                        help="drop the films' geometries within DEG degrees of the mirror direction")
+    parser.add_argument("--max-angle", type=float, default=None, metavar="DEG",
+                        help="drop the films' geometries with incidence or viewing angle beyond DEG degrees")
+    parser.add_argument("--wavelengths", default=None, metavar="NM",
+                        help="bands to fit: a range LOW-HIGH (e.g. 420-500) or a list (e.g. 450,550,650) [nm]")
     parser.add_argument("--walkers", type=int, default=None, help="walkers per ensemble (default 16)")
     parser.add_argument("--ensembles", type=int, default=None,
                         help="independent ensembles = arviz chains (default 4)")
@@ -73,6 +83,34 @@ def eps_argument(text):
     return value
 
 
+def _noise_floor_argument(text):
+    if text is None or text == "infer":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"--noise-floor: expected a number >= 0 or 'infer', got {text!r}") from None
+    if not (np.isfinite(value) and value >= 0):
+        raise ValueError(f"--noise-floor: expected a number >= 0 or 'infer', got {text!r}")
+    return value
+
+
+def _wavelengths_argument(text):
+    """``(wavelengths, wavelength_range)`` from ``--wavelengths``: ``LOW-HIGH`` or ``W1,W2,...`` [nm]."""
+    if text is None:
+        return None, None
+    expected = f"--wavelengths: expected a range LOW-HIGH (e.g. 420-500) or a list W1,W2,... [nm], got {text!r}"
+    try:
+        if "-" in text:
+            low, high = (float(v) for v in text.split("-"))
+            if not low <= high:
+                raise ValueError
+            return None, (low, high)
+        return [float(v) for v in text.split(",")], None
+    except ValueError:
+        raise ValueError(expected) from None
+
+
 def run_infer(args):
     """Run ``bayespig infer``; returns the exit status (flagged wavelengths are printed to stderr)."""
     from ..inference import ConvergenceWarning, InferenceSettings, diagnose, infer, save_inference
@@ -84,6 +122,8 @@ def run_infer(args):
     from ..report.summary_table import columns_to_csv, summary_columns
 
     eps = eps_argument(args.eps)
+    noise_floor = _noise_floor_argument(args.noise_floor)
+    wavelengths, wavelength_range = _wavelengths_argument(args.wavelengths)
     overrides = {name: value for name, value in (("n_walkers", args.walkers),
                                                  ("n_ensembles", args.ensembles),
                                                  ("max_steps", args.max_steps)) if value is not None}
@@ -99,7 +139,9 @@ def run_infer(args):
         warnings.simplefilter("always", ConvergenceWarning)
         idata = infer(measurements, method=_METHODS[args.method], seed=args.seed,
                       g=args.g, eps=eps, progress=not args.no_progress, settings=settings,
-                      substrate_sd=args.substrate_sd)
+                      substrate_sd=args.substrate_sd, noise_floor=noise_floor,
+                      exclude_mirror_deg=args.exclude_mirror, max_angle_deg=args.max_angle,
+                      wavelengths=wavelengths, wavelength_range=wavelength_range)
         flagged = diagnose(idata, warn=False)
     for warning in caught:
         print(f"bayespig: warning: {warning.message}", file=sys.stderr)

@@ -30,7 +30,8 @@ Modules
 
 Sampling
 --------
-* **Coordinates**: ``[a, log tau_1..G, (g), (log eps)]``; every prior is flat on a box there.
+* **Coordinates**: ``[a, log tau_1..G, (g), (log eps), (log noise_floor)]``; every prior is flat
+  on a box there.
 * **Independent ensembles**: ``n_ensembles`` ensembles of ``n_walkers`` walkers each run in one
   :class:`emcee.EnsembleSampler` (``vectorize=True``) whose moves only combine walkers of the
   same ensemble (:class:`IndependentEnsemblesMove`): the ensembles are independent Markov
@@ -86,7 +87,8 @@ of the measured values at one wavelength, films concatenated in problem order), 
     ``a`` (chain, draw, wavelength); ``tau`` (chain, draw, wavelength): ``tau`` of the first
     film group (the thin film; for method 1 the film on glass, from its transmittance), absent
     only when every film is opaque; ``tau_group`` (chain, draw, wavelength, group) when there
-    is more than one group; ``g`` when ``g="free"``; ``eps`` when inferred; ``r_s_factor``
+    is more than one group; ``g`` when ``g="free"``; ``eps`` when inferred; ``noise_floor``
+    (chain, draw, wavelength) when inferred (``infer(noise_floor="infer")``); ``r_s_factor``
     (chain, draw, card) with ``substrate_sd`` (one run over all wavelengths: the draws of
     different wavelengths are then joint draws, not independent runs).
 ``posterior_predictive``
@@ -96,11 +98,12 @@ of the measured values at one wavelength, films concatenated in problem order), 
 ``observed_data``
     ``y`` (wavelength, value).
 ``log_likelihood``
-    ``y`` (chain, draw, wavelength, value): pointwise log-likelihood of eq. (7), single
-    precision.
+    ``y`` (chain, draw, wavelength, value): pointwise log-likelihood of eq. (7) (with the
+    noise floor when there is one), single precision.
 ``constant_data``
     ``r_s`` (wavelength, value): substrate albedo seen from the binder per value (0 for
     transmittance and opaque films); ``eps`` (wavelength, value): known relative error (NaN
+    where inferred); ``noise_floor`` (wavelength, value): the additive floor (0 without one, NaN
     where inferred); ``point_a``, ``point_tau`` (wavelength): the point fit (``point_tau`` of
     the first group).
 ``sample_stats``
@@ -118,11 +121,14 @@ Attributes (on the InferenceData and on every group): ``bayespig_version``,
 ``method``, ``g``, ``eps_mode`` (``known``/``inferred``), ``settings`` (JSON), ``priors``
 (JSON of :meth:`Priors.describe`), ``table_keys`` (JSON list), ``instruments`` (JSON: name ->
 channel labels), ``n`` (binder index), ``parameter_names`` (JSON), ``created`` (UTC ISO time),
-``sampling_wall_time_s``, ``substrate_factors`` (JSON; null without card factors).
+``sampling_wall_time_s``, ``substrate_factors`` (JSON; null without card factors),
+``noise_floor_mode`` (``none``/``known``/``inferred``), ``noise_floor`` (the known floor; 0 for
+none, NaN when inferred) and ``noise_floor_units`` (those of the values: ``1/sr`` for BRDFs).
 
 Variable attributes: every posterior variable has ``long_name`` and ``units`` (``"1"``, all
-are dimensionless; :data:`~bayespig.inference.outputs.VARIABLE_ATTRS`), the ``wavelength``
-coordinate of every group ``units="nm"``.
+are dimensionless except ``noise_floor``, in the values' units;
+:data:`~bayespig.inference.outputs.VARIABLE_ATTRS`), the ``wavelength`` coordinate of every
+group ``units="nm"``.
 
 References
 ----------

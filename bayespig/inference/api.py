@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 import warnings
@@ -9,7 +10,14 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..likelihood import ForwardModel, LogPosterior, Problem
+from ..likelihood import (
+    ForwardModel,
+    LogPosterior,
+    Problem,
+    check_observed,
+    multiplicative_normal_logpdf,
+)
+from ..selection import select_measurements
 from .arguments import (
     check_executor,
     check_flag,
@@ -17,9 +25,11 @@ from .arguments import (
     check_method,
     check_priors,
     check_seed,
+    check_selection,
     check_settings,
     check_substrate_sd,
     eps_argument,
+    noise_floor_argument,
 )
 from .card_factors import CardFactors, card_indices
 from .executors import _WORKER_TABLES, _Task, run_tasks
@@ -45,17 +55,19 @@ def _resolve_eps(eps, measurements):
 
 
 def _check_eps_identifiable(problem, log_post0):
-    """Refuse an inferred ``eps`` where the wavelengths have no more values than parameters.
+    """Refuse an inferred ``eps`` (or noise floor) where the wavelengths have too few values.
 
     With ``n_values <= n_parameters`` (``a``, every ``tau``, ``g``) the point fit reproduces
     the data exactly, the likelihood grows without bound as ``eps -> 0`` and the run would go
-    to ``max_steps`` at every band with nothing learned. ``n_values`` is the same at every
+    to ``max_steps`` at every band with nothing learned; the same holds for an inferred noise
+    floor, and inferring both needs one value more. ``n_values`` is the same at every
     wavelength (every film is measured at all of them).
     """
-    if not log_post0.infer_eps:
+    n_noise = int(log_post0.infer_eps) + int(getattr(log_post0, "infer_noise_floor", False))
+    if not n_noise:
         return
-    names = [name for name in log_post0.parameter_names if name != "log_eps"]
-    if problem.n_values > len(names):
+    names = [name for name in log_post0.parameter_names if name not in ("log_eps", "log_noise_floor")]
+    if problem.n_values >= len(names) + n_noise:
         return
     shown = []
     for name in names:
@@ -65,23 +77,87 @@ def _check_eps_identifiable(problem, log_post0):
     wl = np.asarray(problem.wavelength_nm, dtype=float)
     where = f"{wl.min():g} nm" if wl.size == 1 or wl.min() == wl.max() else f"{wl.min():g}–{wl.max():g} nm"
     values = f"{problem.n_values} value{'s' if problem.n_values != 1 else ''}"
-    raise ValueError(f"eps cannot be inferred: at {where} there {'are' if problem.n_values != 1 else 'is'} "
-                     f"only {values} for {len(names)} parameter{'s' if len(names) != 1 else ''} "
-                     f"({', '.join(shown)}); give eps "
+    are = 'are' if problem.n_values != 1 else 'is'
+    counted = f"{len(names)} parameter{'s' if len(names) != 1 else ''} ({', '.join(shown)})"
+    if n_noise == 2:
+        raise ValueError(f"eps and the noise floor cannot both be inferred: at {where} there {are} only "
+                         f"{values} for {counted} and the two noise parameters; give eps or noise_floor "
+                         "(e.g. eps=0.02, or --eps 0.02 on the command line)")
+    if not log_post0.infer_eps:
+        raise ValueError(f"the noise floor cannot be inferred: at {where} there {are} only {values} for "
+                         f"{counted}; give noise_floor (e.g. noise_floor=0.001, or --noise-floor 0.001 "
+                         "on the command line)")
+    raise ValueError(f"eps cannot be inferred: at {where} there {are} "
+                     f"only {values} for {counted}; give eps "
                      "(e.g. eps=0.02, or --eps 0.02 on the command line)")
 
 
+#: Grid points per decade of the (eps, noise floor) scan that starts the noise parameters.
+_NOISE_GRID_PER_DECADE = 8
+
+
+def _point_fit_problem(problem):
+    """The problem with observed values floored at a tiny positive number for the point fit
+    (whose relative least squares needs values > 0; a zero reading then counts as a relative
+    deviation of -1, as it would at any tiny value)."""
+    films = []
+    for film in problem.films:
+        observed = np.asarray(film.observed, dtype=float)
+        tiny = 1e-12 * max(float(np.max(observed)), 1e-300)
+        films.append(dataclasses.replace(film, observed=np.maximum(observed, tiny)))
+    return dataclasses.replace(problem, films=tuple(films))
+
+
+def _noise_starts(problem, model, fit, priors, log_post0):
+    """Start ``(log eps, log noise_floor)`` columns per wavelength (only those inferred).
+
+    The likelihood with the point fit's prediction held fixed is maximised over a
+    log-spaced grid of the inferred noise parameters (the known ones at their values):
+    cheap, and robust where the relative least squares of the point fit says little about
+    a floor.
+    """
+    def grid(low, high):
+        decades = max(np.log10(high / low), 1.0)
+        return np.geomspace(low, high, int(np.ceil(decades * _NOISE_GRID_PER_DECADE)) + 1)
+
+    eps_known = np.where(np.isnan(log_post0.eps), 0.0, log_post0.eps)
+    unknown = np.isnan(log_post0.eps)
+    eps_grid = grid(*priors.eps_range) if log_post0.infer_eps else np.array([np.nan])
+    floor_grid = grid(*priors.noise_floor_range) if log_post0.infer_noise_floor else np.array([log_post0.noise_floor])
+    E, F = np.meshgrid(eps_grid, floor_grid, indexing="ij")
+    columns = []
+    for index in range(problem.n_wavelengths):
+        m = model.predict(index, fit.a[index:index + 1], fit.tau[index:index + 1], 0.0)[0]
+        x = problem.observed(index)
+        eps = np.where(unknown[None, :], E.ravel()[:, None], eps_known[None, :])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            logpdf = multiplicative_normal_logpdf(x, m, eps, F.ravel()[:, None]).sum(axis=1)
+        best = int(np.argmax(np.where(np.isfinite(logpdf), logpdf, -np.inf)))
+        row = []
+        if log_post0.infer_eps:
+            row.append(np.log(E.ravel()[best]))
+        if log_post0.infer_noise_floor:
+            row.append(np.log(F.ravel()[best]))
+        columns.append(row)
+    return np.array(columns, dtype=float).reshape(problem.n_wavelengths, -1)
+
+
 def _point_starts(problem, g, tables, priors, log_post0, n_wavelengths):
-    """Point-fit starts ``[a, log tau.., (g), (log eps)]`` per wavelength, and the fit."""
+    """Point-fit starts ``[a, log tau.., (g), (log eps), (log noise_floor)]`` per wavelength, and the fit."""
     from ..fit import FitSettings, fit_problem
 
     fit_settings = FitSettings(tau_bounds=tuple(float(v) for v in priors.tau_range),
                                a_bounds=tuple(float(v) for v in priors.a_range))
-    fit = fit_problem(problem, g=0.0, tables=tables, settings=fit_settings, warn=False)
+    floored = getattr(log_post0, "has_noise_floor", False)
+    fit = fit_problem(_point_fit_problem(problem) if floored else problem, g=0.0, tables=tables,
+                      settings=fit_settings, warn=False)
     columns = [fit.a[:, None], np.log(np.maximum(fit.tau, 1e-300))]
     if g == "free":
         columns.append(np.zeros((n_wavelengths, 1)))
-    if log_post0.infer_eps:
+    if floored:
+        if log_post0.infer_eps or log_post0.infer_noise_floor:
+            columns.append(_noise_starts(problem, log_post0.model, fit, priors, log_post0))
+    elif log_post0.infer_eps:
         rms = np.clip(fit.rms_relative_deviation, priors.eps_range[0], priors.eps_range[1])
         columns.append(np.log(rms)[:, None])
     return np.concatenate(columns, axis=1), fit
@@ -102,7 +178,7 @@ def _sample_shared(problem, model, priors, eps, settings, seed, specs, executor,
 
 
 def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, progress=True,
-                  priors=None, settings=None, tables=None, shared=None):
+                  priors=None, settings=None, tables=None, shared=None, noise_floor=None):
     """Posterior samples of a :class:`~bayespig.likelihood.Problem` at every wavelength.
 
     Parameters as :func:`infer`, except ``eps``: a positive number (known, for films without
@@ -110,7 +186,7 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     (instrument -> table) for the point fit and serial runs; ``shared``: parameters shared
     over wavelengths, a sequence of :class:`~bayespig.inference.shared.SharedParameter` specs
     (e.g. :class:`~bayespig.inference.card_factors.CardFactors`), sampled jointly with every
-    wavelength's parameters.
+    wavelength's parameters; ``noise_floor`` as in :func:`infer` (not with ``shared``).
 
     Returns
     -------
@@ -127,15 +203,20 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     check_executor(executor)
     progress = check_flag("progress", progress)
     priors, settings = check_priors(priors), check_settings(settings)
+    noise_floor = noise_floor_argument(noise_floor)
+    shared = tuple(shared) if shared is not None else ()
+    if shared and noise_floor is not None:
+        raise ValueError(f"noise_floor is not available with {' and '.join(spec.title for spec in shared)} "
+                         "(the joint run over all wavelengths has no noise floor yet)")
+    check_observed(problem, noise_floor)
     started = time.perf_counter()
     tables = {} if tables is None else tables
     model = ForwardModel(problem, g=g, tables=tables)
-    log_post0 = LogPosterior(model, 0, priors, g=g, eps=eps)
+    log_post0 = LogPosterior(model, 0, priors, g=g, eps=eps, noise_floor=noise_floor)
     _check_eps_identifiable(problem, log_post0)
     n_wl = problem.n_wavelengths
     starts, fit = _point_starts(problem, g, model.tables, priors, log_post0, n_wl)
     joint = None
-    shared = tuple(shared) if shared is not None else ()
     if shared:
         if g != "isotropic" or eps is None:
             raise ValueError(f"{' and '.join(spec.title for spec in shared)} need g='isotropic' and a known eps")
@@ -147,7 +228,7 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
         # executor), so the samples do not depend on how the tasks are run
         per_run = settings.wavelengths_per_run
         tasks = [_Task(problem, g, eps, priors, settings, tuple(range(i, min(i + per_run, n_wl))),
-                       starts[i:i + per_run], tuple(seeds[i:i + per_run]))
+                       starts[i:i + per_run], tuple(seeds[i:i + per_run]), noise_floor)
                  for i in range(0, n_wl, per_run)]
         if executor is None and len(tasks) == 1:  # runs here: the tables loaded for the point fit
             _WORKER_TABLES.setdefault((g, problem.n), {}).update(model.tables)
@@ -173,7 +254,8 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
 
 
 def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, executor=None,
-          progress=True, priors=None, settings=None, substrate_sd=None):
+          progress=True, priors=None, settings=None, substrate_sd=None, noise_floor=None,
+          exclude_mirror_deg=None, max_angle_deg=None, wavelengths=None, wavelength_range=None):
     """Posterior of ``a`` and ``tau`` (and ``g``, ``eps``) per wavelength from a measurement set.
 
     Parameters
@@ -210,6 +292,24 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         all wavelengths (:mod:`bayespig.inference.card_factors`; slower: one run of
         ``n_wavelengths * (1 + groups) + cards`` parameters) and holds ``r_s_factor`` over
         ``(chain, draw, card)``. Needs ``g="isotropic"`` and a known ``eps``.
+    noise_floor : None, float or "infer"
+        Additive noise floor ``sigma0`` of every measured value, in the values' units (1/sr
+        for a BRDF, a fraction for hemispherical values): ``x_obs ~ N(x, (eps x)^2 +
+        sigma0^2)`` (eq. 7 plus a floor; :mod:`bayespig.likelihood`). None or 0: eq. (7)
+        alone, every observed value must be > 0; a number: a known floor; ``"infer"``: one
+        floor per wavelength shared by all its values, log-uniform on
+        ``priors.noise_floor_range`` (1e-6 .. 1 by default), together with ``eps`` when
+        ``eps="infer"``. With a floor, observed zeros are data. The posterior then holds
+        ``noise_floor`` (chain, draw, wavelength) when inferred; the attributes
+        ``noise_floor_mode`` and ``noise_floor`` record it either way. Not with ``substrate_sd``.
+    exclude_mirror_deg, max_angle_deg : float, optional
+        Drop the films' directional measurements within this angle of the mirror direction,
+        and those with ``theta_i`` or ``theta_o`` beyond ``max_angle_deg`` [deg]
+        (:func:`bayespig.selection.select_measurements`).
+    wavelengths : sequence of float, optional
+        Fit these measured bands only [nm].
+    wavelength_range : (float, float), optional
+        Fit the bands in ``[low, high]`` only [nm].
 
     Returns
     -------
@@ -220,8 +320,11 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     Raises
     ------
     TypeError, ValueError
-        For an argument of the wrong kind or value (the message names it), and for
-        ``eps="infer"`` where a wavelength has no more values than parameters.
+        For an argument of the wrong kind or value (the message names it), for
+        ``eps="infer"`` (or ``noise_floor="infer"``) where a wavelength has no more values than
+        parameters, for an observed value the noise model cannot take (NaN or infinite; 0
+        without a noise floor; negative), naming film, band and geometry, and for a selection
+        that leaves a film without geometries or the set without bands.
     ValueError, MeasurementError
         For a file that cannot be read or a method the samples do not support.
     KeyboardInterrupt
@@ -245,15 +348,23 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     progress = check_flag("progress", progress)
     priors, settings = check_priors(priors), check_settings(settings)
     substrate_sd = check_substrate_sd(substrate_sd)
+    noise_floor = noise_floor_argument(noise_floor)
     if substrate_sd is not None and (g != "isotropic" or eps == "infer"):
         raise ValueError("substrate_sd needs g='isotropic' and a known eps (the joint run over all "
                          "wavelengths does not sample g or eps)")
+    if substrate_sd is not None and noise_floor is not None:
+        raise ValueError("noise_floor is not available with substrate_sd (the joint run over all "
+                         "wavelengths has no noise floor yet)")
+    selection = {"exclude_mirror_deg": exclude_mirror_deg, "max_angle_deg": max_angle_deg,
+                     "wavelengths": wavelengths, "wavelength_range": wavelength_range}
+    check_selection(**selection)
     if not isinstance(measurements, MeasurementSet):
         if isinstance(measurements, (str, os.PathLike)):
             measurements = read_measurements(measurements)
         else:
             raise TypeError("measurements must be a MeasurementSet or a path, "
                             f"got {type(measurements).__name__}")
+    measurements = select_measurements(measurements, **selection)
     eps_value, _ = _resolve_eps(eps, measurements)
     problem = Problem.from_measurements(measurements, method)
     shared = []
@@ -261,4 +372,5 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         cards, card_index = card_indices(measurements, problem)
         shared.append(CardFactors(problem, card_index, substrate_sd, cards))
     return infer_problem(problem, seed=seed, g=g, eps=eps_value, executor=executor,
-                         progress=progress, priors=priors, settings=settings, shared=shared)
+                         progress=progress, priors=priors, settings=settings, shared=shared,
+                         noise_floor=noise_floor)

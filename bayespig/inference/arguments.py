@@ -2,7 +2,9 @@
 
 Each check raises one :class:`TypeError` (wrong kind of value) or :class:`ValueError` (right
 kind, impossible value) whose message names the argument, says what is expected and shows what
-was given; it runs before any file is read or any sample drawn.
+was given; it runs before any file is read or any sample drawn. ``noise_floor`` is checked by
+:func:`bayespig.likelihood.noise_floor_argument` (re-exported here; the likelihood takes the
+same values).
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ import numbers
 
 import numpy as np
 
-from ..likelihood import Priors, method_name
+from ..likelihood import Priors, method_name, noise_floor_argument
 from .settings import InferenceSettings
 
 __all__ = [
@@ -22,9 +24,11 @@ __all__ = [
     "check_method",
     "check_priors",
     "check_seed",
+    "check_selection",
     "check_settings",
     "check_substrate_sd",
     "eps_argument",
+    "noise_floor_argument",
 ]
 
 #: Open interval of a known relative error ``eps`` [-]: a relative standard deviation of the
@@ -131,3 +135,35 @@ def check_substrate_sd(substrate_sd):
     if not (np.isfinite(substrate_sd) and substrate_sd > 0):
         raise ValueError(f"substrate_sd must be {expected}, got {substrate_sd!r}")
     return float(substrate_sd)
+
+
+def check_selection(*, exclude_mirror_deg=None, max_angle_deg=None, wavelengths=None, wavelength_range=None):
+    """The selection arguments of :func:`bayespig.infer` checked without a measurement set:
+    the angles (None or degrees in [0, 180] and [0, 90]), ``wavelengths`` a non-empty sequence
+    of numbers, ``wavelength_range`` a pair ``(low, high)`` with ``low <= high``.
+
+    What needs the set (a wavelength that is not measured, a selection that leaves nothing) is
+    checked by :func:`bayespig.selection.select_measurements`.
+    """
+    for name, value, high in (("exclude_mirror_deg", exclude_mirror_deg, 180.0),
+                              ("max_angle_deg", max_angle_deg, 90.0)):
+        if value is None:
+            continue
+        if not _is_number(value):
+            raise TypeError(f"{name} must be None or a number of degrees in [0, {high:g}], got {_shown(value)}")
+        if not (np.isfinite(value) and 0.0 <= value <= high):
+            raise ValueError(f"{name} must be None or a number of degrees in [0, {high:g}], got {value!r}")
+    if wavelengths is not None:
+        if isinstance(wavelengths, (str, bytes)) or np.ndim(wavelengths) != 1 or not all(
+                _is_number(w) for w in wavelengths):
+            raise TypeError(f"wavelengths must be None or a sequence of wavelengths [nm], got {_shown(wavelengths)}")
+        if len(wavelengths) == 0:
+            raise ValueError("wavelengths must not be empty (None keeps every band)")
+    if wavelength_range is not None:
+        if (isinstance(wavelength_range, (str, bytes)) or np.ndim(wavelength_range) != 1
+                or len(wavelength_range) != 2 or not all(_is_number(w) for w in wavelength_range)):
+            raise TypeError("wavelength_range must be None or a pair (low, high) of wavelengths [nm], "
+                            f"got {_shown(wavelength_range)}")
+        low, high = (float(w) for w in wavelength_range)
+        if not (np.isfinite(low) and np.isfinite(high) and low <= high):
+            raise ValueError(f"wavelength_range must be (low, high) with low <= high [nm], got {wavelength_range!r}")

@@ -37,14 +37,17 @@ class _Task:
     indices: tuple
     starts: np.ndarray  # (len(indices), n_dim)
     seeds: tuple  # SeedSequence per index
+    noise_floor: float | str | None = None  # additive floor: None, known, or "infer"
 
 
 def _run_task(task):
     """Sample the wavelengths of one task, one stack in one sampler (runs in a worker process)."""
     tables = _WORKER_TABLES.setdefault((task.g, task.problem.n), {})
     model = ForwardModel(task.problem, g=task.g, tables=tables)
-    singles = [LogPosterior(model, index, task.priors, g=task.g, eps=task.eps) for index in task.indices]
-    stacked = LogPosterior(model, list(task.indices), task.priors, g=task.g, eps=task.eps)
+    singles = [LogPosterior(model, index, task.priors, g=task.g, eps=task.eps, noise_floor=task.noise_floor)
+               for index in task.indices]
+    stacked = LogPosterior(model, list(task.indices), task.priors, g=task.g, eps=task.eps,
+                           noise_floor=task.noise_floor)
     runs = _sample_stack(stacked, singles, task.starts, task.settings, list(task.seeds))
     return [_wavelength_outputs(single, run, task.settings) for single, run in zip(singles, runs)]
 

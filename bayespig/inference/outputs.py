@@ -14,6 +14,8 @@ VARIABLE_ATTRS = {
     "tau_group": {"long_name": "optical thickness per film group", "units": "1"},
     "g": {"long_name": "Henyey-Greenstein asymmetry parameter g", "units": "1"},
     "eps": {"long_name": "relative measurement error eps (eq. 7)", "units": "1"},
+    # units of noise_floor: those of the measured values, set per result (noise_floor_units)
+    "noise_floor": {"long_name": "additive noise floor sigma0 (sd of a reading of 0)"},
 }
 #: ... and of the wavelength coordinate of every group.
 WAVELENGTH_ATTRS = {"long_name": "wavelength", "units": "nm"}
@@ -42,9 +44,17 @@ def _wavelength_outputs(log_post, run, settings):
     if log_post.infer_eps:
         k = 1 + log_post.n_groups + log_post.free_g
         out["eps"] = np.exp(flat[:, k]).reshape(shape)
+    floor = None
+    if getattr(log_post, "infer_noise_floor", False):
+        floor = log_post.noise_floor_of(flat)
+        out["noise_floor"] = floor.reshape(shape)
+    elif getattr(log_post, "has_noise_floor", False):
+        floor = log_post.noise_floor_of(flat)
     if settings.predictive_noise:
         rng = np.random.default_rng(run["predictive_seed"])
         noisy = model * (1.0 + np.broadcast_to(eps, model.shape) * rng.standard_normal(model.shape))
+        if floor is not None:  # the additive floor, independent of the multiplicative noise
+            noisy = noisy + floor[:, None] * rng.standard_normal(model.shape)
         out["y_rep"] = noisy.reshape(shape + (-1,))
     out.pop("predictive_seed")
     return out
@@ -64,6 +74,22 @@ def _value_coordinates(problem):
             channel += list(film.instrument.labels)
         r_s.append(np.repeat(np.asarray(film.r_s, dtype=float)[:, None], k, axis=1))
     return sample, channel, kind, group, np.concatenate(r_s, axis=1)
+
+
+def noise_floor_units(problem):
+    """Units of the noise floor: those of the measured values (``"1/sr"`` for BRDFs, ``"1"`` for
+    reflectances, reflectance factors and transmittances; both named for a mix)."""
+    kinds = set()
+    for film in problem.films:
+        if film.kind == "transmittance" or film.instrument is None:
+            kinds.add("fraction")
+        else:
+            kinds.update("brdf" if c.kind == "brdf" else "fraction" for c in film.instrument.channels)
+    if kinds == {"brdf"}:
+        return "1/sr"
+    if kinds == {"fraction"}:
+        return "1"
+    return "1/sr for BRDF values, 1 for the other values"
 
 
 def _versions():
@@ -130,6 +156,10 @@ def _inference_data(problem, model, results, settings, log_post0, fit, *, seed, 
         posterior["g"] = (cdw, stack("g"))
     if log_post0.infer_eps:
         posterior["eps"] = (cdw, stack("eps"))
+    floor_mode = ("inferred" if getattr(log_post0, "infer_noise_floor", False)
+                  else "known" if getattr(log_post0, "has_noise_floor", False) else "none")
+    if floor_mode == "inferred":
+        posterior["noise_floor"] = (cdw, stack("noise_floor"))
     post_coords = dict(coords)
     if len(groups) > 1:
         post_coords["group"] = groups
@@ -159,6 +189,10 @@ def _inference_data(problem, model, results, settings, log_post0, fit, *, seed, 
     constant = {
         "r_s": (("wavelength", "value"), r_s),
         "eps": (("wavelength", "value"), np.broadcast_to(known, (n_wl, known.size)).copy()),
+        # the additive floor per value: 0 without one, NaN where inferred
+        "noise_floor": (("wavelength", "value"),
+                        np.full((n_wl, known.size), np.nan if floor_mode == "inferred"
+                                else getattr(log_post0, "noise_floor", 0.0))),
         "point_a": (("wavelength",), fit.a),
         "point_tau": (("wavelength",), fit.tau[:, 0] if groups else np.full(n_wl, np.inf)),
     }
@@ -172,6 +206,11 @@ def _inference_data(problem, model, results, settings, log_post0, fit, *, seed, 
         "method": problem.method,
         "g": g,
         "eps_mode": "inferred" if log_post0.infer_eps else "known",
+        # the additive noise floor: "none", "known" (its value in noise_floor) or "inferred"
+        "noise_floor_mode": floor_mode,
+        "noise_floor": float(log_post0.noise_floor) if floor_mode == "known" else (
+            float("nan") if floor_mode == "inferred" else 0.0),
+        "noise_floor_units": noise_floor_units(problem),
         "settings": settings.to_json(log_post0.n_dim),
         "priors": json.dumps(priors.describe(), sort_keys=True),
         "table_keys": json.dumps(list(model.table_keys)),
@@ -203,6 +242,7 @@ def _inference_data(problem, model, results, settings, log_post0, fit, *, seed, 
         if "wavelength" in dataset.coords:
             dataset.coords["wavelength"].attrs.update(WAVELENGTH_ATTRS)
     described = dict(VARIABLE_ATTRS)
+    described["noise_floor"] = {**VARIABLE_ATTRS["noise_floor"], "units": noise_floor_units(problem)}
     described.update({spec.variable: {"long_name": spec.long_name, "units": spec.units} for spec, _ in shared})
     for name, variable_attrs in described.items():
         if name in datasets["posterior"]:

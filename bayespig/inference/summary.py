@@ -17,7 +17,7 @@ def _parameter_views(idata):
     views = [("a", posterior["a"])]
     if "tau" in posterior:
         views.append(("tau", posterior["tau"]))
-    for name in ("g", "eps"):
+    for name in ("g", "eps", "noise_floor"):
         if name in posterior:
             views.append((name, posterior[name]))
     return views
@@ -37,7 +37,7 @@ def summarize(idata, hdi_prob=0.9):
     -------
     pandas.DataFrame
         One row per wavelength (index ``wavelength`` [nm]); per parameter ``p`` in ``a``,
-        ``tau`` (and ``g``, ``eps``): ``p_mean``, ``p_sd``, ``p_hdi_low``, ``p_hdi_high``,
+        ``tau`` (and ``g``, ``eps``, ``noise_floor``): ``p_mean``, ``p_sd``, ``p_hdi_low``, ``p_hdi_high``,
         ``p_ess_bulk``, ``p_ess_tail``, ``p_r_hat``; and ``corr_a_log_tau``, the posterior
         correlation of ``a`` with ``log tau`` (pooled draws).
     """

@@ -38,7 +38,7 @@ import numpy as np
 from .. import colorimetry
 from ..data.model import BLACK_SUBSTRATE_ALBEDO, WHITE_SUBSTRATE_ALBEDO, parse_measurement_geometry
 from ..instruments import Channel, Instrument
-from ..likelihood import FilmTerm, Priors, Problem
+from ..likelihood import FilmTerm, Priors, Problem, noise_sd
 
 __all__ = [
     "COLOUR_MATCH_DELTA_E",
@@ -143,7 +143,7 @@ def priors_from_inference(idata):
     if isinstance(recorded, dict):
         for key, value in recorded.items():
             name = key if key.endswith("_range") else f"{key}_range"
-            if name not in ("a_range", "tau_range", "g_range", "eps_range"):
+            if name not in ("a_range", "tau_range", "g_range", "eps_range", "noise_floor_range"):
                 continue
             if isinstance(value, (list, tuple)) and len(value) == 2:
                 ranges[name] = (float(value[0]), float(value[1]))
@@ -546,12 +546,33 @@ def eps_origin(idata, measurements=None):
                     + ("; it equals the default, so it may only be assumed" if assumed else "") + ")"}
 
 
+def noise_floor_per_value(idata, draws=False, max_draws=None):
+    """Additive noise floor of every measured value [units of the values].
+
+    0 for a posterior without a floor (and for one saved before floors existed); the known
+    floor from ``constant_data``; where it was inferred, the posterior median of that
+    wavelength, or with ``draws=True`` every (thinned) draw, shape (n_draws, n_wavelengths, 1).
+    """
+    observed = idata.observed_data["y"]
+    constant = getattr(idata, "constant_data", None)
+    floor = np.zeros(observed.shape)
+    if constant is not None and "noise_floor" in constant:
+        floor = np.asarray(constant["noise_floor"].values, dtype=float).copy()
+    if np.isnan(floor).any() and "noise_floor" in idata.posterior:
+        drawn = posterior_draws(idata, "noise_floor", max_draws)  # (n_draws, n_wavelengths)
+        if draws:
+            return np.where(np.isnan(floor), drawn[:, :, None], floor)
+        floor = np.where(np.isnan(floor), np.median(drawn, axis=0)[:, None], floor)
+    return floor
+
+
 def residuals_in_eps(idata, max_draws=None):
     """Residuals of every measured value in units of its relative error (paper eq. 7).
 
     ``z = (x_obs - x_pred) / (eps x_pred)`` with ``x_pred`` the posterior-mean noise-free
-    prediction; at the truth ``z`` is standard normal, so ``|z| > 3`` marks a value the
-    model does not explain.
+    prediction (``/ sqrt((eps x_pred)^2 + sigma0^2)`` with a noise floor ``sigma0``,
+    :func:`bayespig.likelihood.noise_sd`); at the truth ``z`` is standard normal, so
+    ``|z| > 3`` marks a value the model does not explain.
 
     Returns
     -------
@@ -565,7 +586,7 @@ def residuals_in_eps(idata, max_draws=None):
     mean = predicted.mean(axis=0)
     q05, q95 = np.quantile(predicted, [0.05, 0.95], axis=0)
     eps = eps_per_value(idata)
-    z = (observed - mean) / (eps * mean)
+    z = (observed - mean) / noise_sd(mean, eps, noise_floor_per_value(idata))
     return {"observed": observed, "predicted_mean": mean, "predicted_q05": q05,
             "predicted_q95": q95, "predicted_draws": predicted, "eps": eps, "z": z,
             "rows": value_table(idata)}
@@ -599,7 +620,9 @@ def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
 
     The discrepancy is the chi-square of the noise model (paper eq. 7),
     ``T(x, theta) = sum_v ((x_v - m_v) / (eps_v m_v))^2`` over the ``n`` values measured at
-    the wavelength, with ``m = m(theta)`` the noise-free prediction of a posterior draw.
+    the wavelength, with ``m = m(theta)`` the noise-free prediction of a posterior draw
+    (with a noise floor ``sigma0`` the denominator is ``sqrt((eps_v m_v)^2 + sigma0^2)``,
+    :func:`bayespig.likelihood.noise_sd`, and ``T`` is chi-square all the same).
     Replicated data ``x_rep = m (1 + eps xi)`` give ``T(x_rep, theta) ~ chi2(n)`` exactly, so
     the posterior predictive p-value ``p = P(T(x_rep, theta) >= T(x_obs, theta) | x_obs)``
     is the posterior mean of ``chi2.sf(T(x_obs, theta), n)`` -- no replicated draws needed
@@ -663,14 +686,15 @@ def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
     measured = np.isfinite(observed)
     n_values = measured.sum(axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        z2 = np.where(measured, ((observed - predicted) / (eps * predicted)) ** 2, 0.0)
+        floor = noise_floor_per_value(idata, draws=True, max_draws=max_draws)
+        z2 = np.where(measured, ((observed - predicted) / noise_sd(predicted, eps, floor)) ** 2, 0.0)
     chi2_draws = z2.sum(axis=-1)  # (n_draws, n_wavelengths)
     p_value = stats.chi2.sf(chi2_draws, np.maximum(n_values, 1)).mean(axis=0)
     p_value = np.where(n_values > 0, p_value, np.nan)
     mean = predicted.mean(axis=0)
     eps_mean = eps_per_value(idata)
     with np.errstate(divide="ignore", invalid="ignore"):
-        z = (observed - mean) / (eps_mean * mean)
+        z = (observed - mean) / noise_sd(mean, eps_mean, noise_floor_per_value(idata))
     chi2 = np.nansum(np.where(measured, z * z, 0.0), axis=-1)
     worst = np.argmax(np.where(measured, np.abs(np.nan_to_num(z, nan=np.inf)), -1.0), axis=-1)
     n_parameters = np.full(n_values.shape, parameters_per_wavelength(idata))
@@ -967,7 +991,7 @@ def ravine(idata, index, *, a_limits=None, tau_limits=None, n_grid=121, problem=
     """Log-likelihood (eq. 7) over a grid of ``(a, tau)`` at wavelength ``index``.
 
     Uses :class:`~bayespig.likelihood.LogPosterior` (the sampled density) on the problem
-    rebuilt from the posterior; further film groups' ``tau``, ``g`` and an inferred ``eps``
+    rebuilt from the posterior; further film groups' ``tau``, ``g``, an inferred ``eps`` and noise floor
     are held at their posterior medians.
 
     Parameters
@@ -996,7 +1020,10 @@ def ravine(idata, index, *, a_limits=None, tau_limits=None, n_grid=121, problem=
     if not infer_eps and known is None:
         # per-film eps: carried by the films of the rebuilt problem
         known = float(np.median(eps))
-    log_post = LogPosterior(model, index, priors, g_kind, None if infer_eps else known)
+    floor = noise_floor_per_value(idata)[index]
+    floor_inferred = "noise_floor" in idata.posterior
+    log_post = LogPosterior(model, index, priors, g_kind, None if infer_eps else known,
+                            noise_floor="infer" if floor_inferred else float(np.max(floor, initial=0.0)))
     a_limits = a_limits or priors.a_range
     tau_limits = tau_limits or priors.tau_range
     a_grid = np.linspace(a_limits[0], a_limits[1], n_grid)
@@ -1017,6 +1044,10 @@ def ravine(idata, index, *, a_limits=None, tau_limits=None, n_grid=121, problem=
         eps_med = float(np.median(posterior_draws(idata, "eps")[:, index]))
         theta.append(np.full(A.size, np.log(eps_med)))
         held["eps"] = eps_med
+    if floor_inferred:
+        floor_med = float(np.median(posterior_draws(idata, "noise_floor")[:, index]))
+        theta.append(np.full(A.size, np.log(floor_med)))
+        held["noise_floor"] = floor_med
     theta = np.column_stack(theta)
     # keep the grid inside the support (the box edges are inclusive)
     theta = np.clip(theta, log_post.lower, log_post.upper)
