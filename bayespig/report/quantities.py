@@ -852,12 +852,15 @@ class FilmDesign:
 
 def default_unmeasured_films(problem):
     """Opaque; the measured film group at twice and half its ``tau`` on black and white; and
-    the film on the substrate it was not measured on (e.g. white for method 3)."""
+    the film on the substrate it was not measured on (e.g. white for method 3). Only the opaque
+    film when every film is opaque (no ``tau`` to scale)."""
     group = problem.groups[0] if problem.groups else None
     measured_r_s = [float(np.median(f.r_s)) for f in problem.films
                     if f.kind == "reflectance" and f.group == group and group is not None]
     films = [FilmDesign("opaque (hiding)", np.inf, 0.0, measured=any(f.opaque for f in problem.films
                                                                      if f.kind == "reflectance"))]
+    if group is None:
+        return films
     for name, r_s in (("black", BLACK_SUBSTRATE_ALBEDO), ("white", WHITE_SUBSTRATE_ALBEDO)):
         if not any(abs(m - r_s) < 0.02 for m in measured_r_s):
             films.append(FilmDesign(f"1 x tau on {name}", 1.0, r_s))
@@ -902,7 +905,13 @@ def predicted_film_values(idata, films, *, instrument=None, max_draws=400, table
     table = tables.get(g_kind) or load_table(instrument, g=g_kind, n=problem.n, progress=False)
     tables[g_kind] = table
     a = posterior_draws(idata, "a", max_draws)
-    tau = posterior_draws(idata, "tau", max_draws)
+    if "tau" in idata.posterior:
+        tau = posterior_draws(idata, "tau", max_draws)
+    elif all(not np.isfinite(film.tau_scale) for film in films):
+        tau = np.full(a.shape, np.inf)  # opaque films need no tau
+    else:
+        raise ValueError("films: the posterior has no tau (every measured film is opaque), so only opaque "
+                         "films (tau_scale = inf) can be predicted")
     g = posterior_draws(idata, "g", max_draws) if g_kind == "free" else np.zeros_like(a)
     out = np.empty((len(films), a.shape[0], a.shape[1], len(instrument)))
     for j, film in enumerate(films):

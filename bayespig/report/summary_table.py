@@ -17,6 +17,11 @@ inferred):
     Posterior correlation of ``a`` and ``log tau``.
 ``point_a``, ``point_tau``
     The least-squares point fit (the paper's procedure).
+
+A parameter the posterior does not have has no columns: when every film is opaque (hides its
+substrate) ``tau`` is not identified and not a parameter, so the ``tau_*``, ``corr_a_log_tau``,
+``point_tau``, ``k_ext_*`` and ``sigma_ext_*`` columns are absent (not empty); the other
+columns are the same.
 ``k_ext_*``, ``sigma_ext_*``
     Only when the film's thickness (and concentration) are known: the extinction coefficient
     ``tau / H`` [1/µm] and cross-section ``tau / (H D)`` (mean, sd, median, ci90 low/high).
@@ -118,7 +123,7 @@ def summary_columns(idata, *, measurements=None, check=None, diagnostics=None):
         with np.errstate(invalid="ignore", divide="ignore"):
             columns["corr_a_log_tau"] = (da * dt).sum(axis=0) / np.sqrt((da * da).sum(axis=0) * (dt * dt).sum(axis=0))
     constant = getattr(idata, "constant_data", None)
-    for name in ("a", "tau"):
+    for name in ("a", "tau") if "tau" in idata.posterior else ("a",):
         columns[f"point_{name}"] = (np.asarray(constant[f"point_{name}"].values, dtype=float)
                                     if constant is not None and f"point_{name}" in constant
                                     else np.full(wl.size, np.nan))
