@@ -384,7 +384,7 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     diag = q.diagnostics(idata, priors=priors)
 
     blocks.append(doc.heading(title, 1))
-    intro = (f"Posterior, per wavelength, of the relative absorption a = 1 - albedo"
+    intro = ("Posterior, per wavelength, of the relative absorption a = 1 - albedo"
              + (" and the optical thickness tau" if has_tau else "")
              + f"{' and the phase parameter g' if 'g' in bands else ''}: "
              f"{wl.size} wavelengths {wl[0]:g}-{wl[-1]:g} nm, from {len(problem.films)} measured "
