@@ -855,6 +855,40 @@ def _value_coordinates(problem):
     return sample, channel, kind, group, np.concatenate(r_s, axis=1)
 
 
+#: InferenceData attribute with the support of every posterior variable's prior (JSON).
+PRIOR_BOUNDS_ATTR = "prior_bounds"
+
+
+def _prior_bounds(priors, posterior, joint=None):
+    """The support of the prior of every posterior variable, for the prior-edge flags.
+
+    Parameters
+    ----------
+    priors : Priors
+    posterior : dict
+        Posterior variable name -> (dims, draws), as stored.
+    joint : CardFactorLogPosterior, optional
+        The card factors' joint posterior (their truncated prior's box).
+
+    Returns
+    -------
+    dict
+        Variable -> ``{"lower", "upper", "scale"}``: the bounds in the variable's own units
+        (numbers, or lists along its one non-sampling dimension that is not ``wavelength``, e.g.
+        ``card``) and the coordinate in which the prior is flat or sampled (``"linear"`` or
+        ``"log"``).
+    """
+    ranges = {"a": (priors.a_range, "linear"), "tau": (priors.tau_range, "log"),
+              "tau_group": (priors.tau_range, "log"), "g": (priors.g_range, "linear"),
+              "eps": (priors.eps_range, "log")}
+    bounds = {name: {"lower": float(low), "upper": float(high), "scale": scale}
+              for name, ((low, high), scale) in ranges.items() if name in posterior}
+    if joint is not None and "r_s_factor" in posterior:
+        bounds["r_s_factor"] = {"lower": np.exp(joint.log_f_lower).tolist(),
+                                "upper": np.exp(joint.log_f_upper).tolist(), "scale": "log"}
+    return bounds
+
+
 def _versions():
     import arviz
     import emcee
@@ -1075,6 +1109,7 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
         "instruments": json.dumps(instruments, sort_keys=True),
         "n": float(problem.n),
         "parameter_names": json.dumps(parameters),
+        PRIOR_BOUNDS_ATTR: json.dumps(_prior_bounds(priors, posterior, joint)),
         "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "sampling_wall_time_s": float(time.perf_counter() - started),
         "substrate_factors": json.dumps(None if joint is None else {

@@ -58,6 +58,11 @@ OPAQUE_ONLY_TEXT = (
     "only: the optical thickness tau is not identified by these measurements and is not a parameter "
     "- this report has no tau, no extinction and no ravine. To measure tau too, add a film that does "
     "not hide its substrate (e.g. the same paint on black: the paper's method 2).")
+#: What the report says before the list of parameters at a bound of their prior.
+PRIOR_EDGE_TEXT = (
+    "Where a posterior is piled against a bound of its prior (its 5 % or 95 % quantile closer to the "
+    "bound than a tenth of its 90 % interval), that side of its interval is the prior's cut, not the "
+    "data's:")
 #: Draws used for colour and predictions of unmeasured films (evenly thinned).
 MAX_COLOUR_DRAWS = 400
 #: Draws shown in corner plots and the ravine figure.
@@ -462,6 +467,12 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
             "Model check: the model reproduces the measurements within their noise at every "
             + ("testable " if untestable.size else "") + "wavelength "
             f"(posterior predictive p >= {check['level']:g})." + (" " + untestable_text if untestable_text else "")))
+    edges = q.prior_edges(idata)
+    if edges:
+        blocks.append(doc.paragraph(PRIOR_EDGE_TEXT, lead="Prior edge."))
+        blocks.append(doc.bullets([edge["text"] + "." for edge in edges]))
+    else:
+        blocks.append(doc.paragraph("Prior edge: no posterior is piled against a bound of its prior."))
     colour_slot = len(blocks)  # the colour verdict goes here once computed
 
     blocks.append(doc.heading("Optical properties"))
@@ -744,11 +755,13 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         "diagnostics": {k: diag[k] for k in ("ess", "rhat", "flags", "n_chains", "n_draws", "rhat_max", "ess_min")},
         "fit_quality": fit_rows,
         "model_check": {"level": check["level"], "p_value": check["p_value"], "misfit": misfit},
+        "prior_edge": edges,
         "substrate_factors": factors,
         "colour": colour_summary, "priors": priors.describe(),
         "ravine_wavelength_nm": None if r_index is None else float(wl[r_index]), "provenance": prov,
     }
-    csv_text = summary_table.summary_csv(idata, measurements=measurements, check=check, diagnostics=diag)
+    csv_text = summary_table.summary_csv(idata, measurements=measurements, check=check, diagnostics=diag,
+                                         edges=edges)
     return {"blocks": blocks, "figures": pngs, "summary": _jsonable(summary), "csv": csv_text,
             "title": title}
 

@@ -57,6 +57,7 @@ def test_opaque_only_report_is_written_and_says_tau_is_not_identified(opaque_run
         "only: the optical thickness tau is not identified by these measurements and is not a parameter "
         "- this report has no tau, no extinction and no ravine. To measure tau too, add a film that does "
         "not hide its substrate (e.g. the same paint on black: the paper's method 2).")
+    assert "Prior edge: no posterior is piled against a bound of its prior." in markdown
     assert "No ravine figure: it shows the log-likelihood over (a, tau), and every film here is opaque, " \
            "so tau is not a parameter." in markdown
     assert "- tau: not a parameter (every film is opaque)" in markdown
@@ -71,7 +72,8 @@ def test_opaque_only_summary_has_no_tau_columns_and_recovers_a(opaque_run):
     rows = list(csv.DictReader(io.StringIO((opaque_run / "report" / "summary.csv").read_text())))
     header = list(rows[0])
     assert not [c for c in header if "tau" in c or c.startswith(("k_ext", "sigma_ext"))]
-    assert header[:2] == ["wavelength_nm", "a_mean"] and "point_a" in header
+    assert header[:2] == ["wavelength_nm", "a_mean"] and "point_a" in header and "prior_edge" in header
+    assert {r["prior_edge"] for r in rows} == {""}
     # infer writes the same table
     assert (opaque_run / "run" / "summary.csv").read_text().splitlines()[0] == ",".join(header)
     median = np.array([float(r["a_median"]) for r in rows])
