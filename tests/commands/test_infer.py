@@ -60,7 +60,6 @@ def test_unsupported_method_is_a_clear_error(tmp_path):
 
 def test_infer_warns_of_a_posterior_at_its_prior_bound(tmp_path, capsys):
     """An opaque film that absorbs nothing at 400-450 nm: a piles against its prior bound 0 there."""
-    from bayespig.report import write_report
     from bayespig.report.write import PRIOR_EDGE_TEXT
 
     data = tmp_path / "film.csv"
@@ -76,11 +75,19 @@ def test_infer_warns_of_a_posterior_at_its_prior_bound(tmp_path, capsys):
     assert list(summary["prior_edge"]) == ["a at 0", "a at 0", "", ""]
     idata = load_inference(out / "posterior.nc")
     assert json.loads(idata.posterior.attrs["prior_bounds"]) == {"a": {"lower": 0.0, "upper": 1.0, "scale": "linear"}}
-    # the report shows it at the top, and in summary.json
-    result = write_report(out / "posterior.nc", tmp_path / "report", corner_wavelengths=())
+    # bayespig report prints it too, shows it at the top, and lists it in summary.json
+    from bayespig.commands.report import add_report_parser
+
+    parser = argparse.ArgumentParser(prog="bayespig")
+    add_report_parser(parser.add_subparsers())
+    args = parser.parse_args(["report", str(out / "posterior.nc"), "--out", str(tmp_path / "report"),
+                              "--no-progress"])
+    assert args.func(args) == 0
+    assert f"bayespig: warning: {message}\n" in capsys.readouterr().err
     markdown = (tmp_path / "report" / "report.md").read_text()
     from bayespig.report.document import _md_escape
 
     assert f"**Prior edge.** {_md_escape(PRIOR_EDGE_TEXT)}\n\n- {_md_escape(message)}." in markdown
     assert markdown.index("Prior edge") < markdown.index("## Optical properties")
-    assert [e["text"] for e in result.summary["prior_edge"]] == [message]
+    summary_json = json.loads((tmp_path / "report" / "summary.json").read_text())
+    assert [e["text"] for e in summary_json["prior_edge"]] == [message]
