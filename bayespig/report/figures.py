@@ -139,7 +139,7 @@ def corner_figure(samples, labels, *, point=None, truth=None, title=""):
 
 def _histogram_figure(draws, label, *, point=None, truth=None, title=""):
     """The posterior of one parameter: histogram, 5/50/95 % quantiles, point fit and truth."""
-    fig = _figure(4.5, 3.2)
+    fig = _figure(6.0, 3.2)
     ax = fig.subplots()
     ax.hist(draws, bins=40, color="0.35", histtype="step", lw=1.2)
     quantiles = np.quantile(draws, [0.05, 0.5, 0.95])
@@ -156,7 +156,7 @@ def _histogram_figure(draws, label, *, point=None, truth=None, title=""):
     from matplotlib.lines import Line2D
 
     ax.legend(handles=[Line2D([], [], label=text, **style) for text, style in handles_labels],
-              fontsize=8, frameon=False)
+              fontsize=8, frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     ax.set_xlabel(label)
     ax.set_ylabel("draws")
     ax.locator_params(axis="x", nbins=CORNER_MAX_TICKS)
