@@ -859,7 +859,7 @@ def _value_coordinates(problem):
 PRIOR_BOUNDS_ATTR = "prior_bounds"
 
 
-def _prior_bounds(priors, posterior, joint=None):
+def _prior_bounds(priors, posterior, shared=()):
     """The support of the prior of every posterior variable, for the prior-edge flags.
 
     Parameters
@@ -867,25 +867,35 @@ def _prior_bounds(priors, posterior, joint=None):
     priors : Priors
     posterior : dict
         Posterior variable name -> (dims, draws), as stored.
-    joint : CardFactorLogPosterior, optional
-        The card factors' joint posterior (their truncated prior's box).
+    shared : sequence
+        Joint posteriors or specs of parameters shared by all wavelengths: the card factors'
+        :class:`~bayespig.substrate_nuisance.CardFactorLogPosterior` (its ``log_f_lower``,
+        ``log_f_upper``), or any object with ``variable``, ``lower``, ``upper`` (the box of its
+        sampled coordinates), ``physical`` (coordinates -> stored values) and optionally
+        ``prior_scale`` (``"linear"`` by default).
 
     Returns
     -------
     dict
         Variable -> ``{"lower", "upper", "scale"}``: the bounds in the variable's own units
-        (numbers, or lists along its one non-sampling dimension that is not ``wavelength``, e.g.
-        ``card``) and the coordinate in which the prior is flat or sampled (``"linear"`` or
-        ``"log"``).
+        (numbers, or lists along its one dimension other than chain, draw and wavelength,
+        e.g. ``card``) and the coordinate in which the prior is flat or sampled (``"linear"``
+        or ``"log"``).
     """
     ranges = {"a": (priors.a_range, "linear"), "tau": (priors.tau_range, "log"),
               "tau_group": (priors.tau_range, "log"), "g": (priors.g_range, "linear"),
               "eps": (priors.eps_range, "log")}
     bounds = {name: {"lower": float(low), "upper": float(high), "scale": scale}
               for name, ((low, high), scale) in ranges.items() if name in posterior}
-    if joint is not None and "r_s_factor" in posterior:
-        bounds["r_s_factor"] = {"lower": np.exp(joint.log_f_lower).tolist(),
-                                "upper": np.exp(joint.log_f_upper).tolist(), "scale": "log"}
+    for item in shared:
+        if hasattr(item, "log_f_lower"):
+            bounds["r_s_factor"] = {"lower": np.exp(item.log_f_lower).tolist(),
+                                    "upper": np.exp(item.log_f_upper).tolist(), "scale": "log"}
+        elif getattr(item, "variable", None) in posterior:
+            lower = np.asarray(item.physical(np.atleast_2d(item.lower)), dtype=float)[0]
+            upper = np.asarray(item.physical(np.atleast_2d(item.upper)), dtype=float)[0]
+            bounds[item.variable] = {"lower": lower.tolist(), "upper": upper.tolist(),
+                                     "scale": getattr(item, "prior_scale", "linear")}
     return bounds
 
 
@@ -1109,7 +1119,7 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
         "instruments": json.dumps(instruments, sort_keys=True),
         "n": float(problem.n),
         "parameter_names": json.dumps(parameters),
-        PRIOR_BOUNDS_ATTR: json.dumps(_prior_bounds(priors, posterior, joint)),
+        PRIOR_BOUNDS_ATTR: json.dumps(_prior_bounds(priors, posterior, () if joint is None else (joint,))),
         "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "sampling_wall_time_s": float(time.perf_counter() - started),
         "substrate_factors": json.dumps(None if joint is None else {

@@ -135,3 +135,27 @@ def test_a_posterior_without_recorded_bounds_uses_its_priors_text():
     idata.posterior.attrs["priors"] = json.dumps({"a": "uniform on [0, 1]"})
     assert q.prior_bounds(idata) == {"a": {"lower": 0.0, "upper": 1.0, "scale": "linear"}}
     assert [e["bound"] for e in q.prior_edges(idata)] == ["lower"]
+
+
+def test_infer_records_the_support_of_every_prior():
+    """bayespig.inference._prior_bounds: the box of a, tau, g, eps and of any shared parameter."""
+    from bayespig.inference import _prior_bounds
+    from bayespig.likelihood import Priors
+
+    class Roughness:  # a shared parameter as the joint sampler's specs describe it
+        variable = "roughness"
+        lower, upper = np.array([np.log(1e-3)]), np.array([np.log(0.5)])
+        prior_scale = "log"
+
+        def physical(self, x):
+            return np.exp(x)
+
+    posterior = {name: None for name in ("a", "tau", "g", "roughness")}
+    bounds = _prior_bounds(Priors(g_range=(-0.3, 0.9)), posterior, [Roughness()])
+    assert bounds["a"] == {"lower": 0.0, "upper": 1.0, "scale": "linear"}
+    assert bounds["tau"] == {"lower": 0.01, "upper": 100.0, "scale": "log"}
+    assert bounds["g"] == {"lower": -0.3, "upper": 0.9, "scale": "linear"}
+    assert "eps" not in bounds  # not a parameter of this posterior
+    np.testing.assert_allclose(bounds["roughness"]["lower"], [1e-3])
+    np.testing.assert_allclose(bounds["roughness"]["upper"], [0.5])
+    assert bounds["roughness"]["scale"] == "log"
