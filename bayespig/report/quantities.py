@@ -1,8 +1,8 @@
 """The numbers of an uncertainty report, computed from a posterior (no plotting, no files).
 
 Everything here reads an arviz ``InferenceData`` written by :func:`bayespig.infer`
-(schema: ``posterior`` ``a``, ``tau``, optional ``tau_group``, ``g``, ``eps`` over
-``(chain, draw, wavelength)``; ``posterior_predictive``/``observed_data`` ``y`` over
+(schema: ``posterior`` ``a``, ``tau`` (absent when every film is opaque), optional
+``tau_group``, ``g``, ``eps`` over ``(chain, draw, wavelength)``; ``posterior_predictive``/``observed_data`` ``y`` over
 ``(wavelength, value)`` with the coordinates ``sample``, ``channel``, ``kind``,
 ``film_group`` along ``value``; ``constant_data`` ``r_s``, ``eps``, ``point_a``,
 ``point_tau``) and turns it into plain arrays and dicts:
@@ -12,6 +12,8 @@ Everything here reads an arviz ``InferenceData`` written by :func:`bayespig.infe
   when thickness ``H`` and concentration ``D`` are known (paper appendix A2; only
   ``D sigma_ext`` matters, so ``sigma_ext`` is in the user's concentration units);
 * convergence diagnostics (bulk ESS and rank-normalised R-hat, arviz) and flagged wavelengths;
+* prior edges: the parameters whose posterior is piled against a bound of its prior's support
+  (:func:`prior_edges`, over the supports that :func:`bayespig.infer` records);
 * fit quality: residuals of every measured value in units of its relative error ``eps``
   (paper eq. 7: ``(x_obs - x_model) / (eps x_model)`` is standard normal at the truth), and
   a posterior predictive check that flags the wavelengths the model cannot reproduce;

@@ -15,7 +15,13 @@ measurement file, inferred first) and writes into ``out_dir``:
     model check, flags.
 ``summary.json``
     The same numbers plus colour, fit quality and model check (the wavelengths the model
-    cannot reproduce), predicted films, diagnostics and provenance.
+    cannot reproduce), the prior edges (``prior_edge``: parameters piled against a bound of
+    their prior, :func:`~bayespig.report.quantities.prior_edges`), predicted films,
+    diagnostics and provenance.
+
+A posterior of opaque films only (no ``tau``) gets the same report without what needs ``tau``
+(its bands and columns, extinction, the ravine, films other than the opaque one), and says why
+(:data:`OPAQUE_ONLY_TEXT`).
 ``posterior.nc``
     The posterior itself (netCDF), so the report's numbers can be recomputed.
 
