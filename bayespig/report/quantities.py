@@ -549,7 +549,7 @@ def diagnostics(idata, variables=None, *, rhat_max=RHAT_MAX, ess_min=ESS_MIN, pr
         from ..inference import diagnose
     except ImportError:  # pragma: no cover - the inference layer ships with the package
         diagnose = None
-    if diagnose is not None and "tau" in posterior:
+    if diagnose is not None:
         for line in diagnose(idata, rhat_max=rhat_max, ess_min=ess_min, warn=False):
             head, _, reasons = line.partition(" nm: ")
             flags.setdefault(float(head), []).extend(reasons.split("; "))
