@@ -221,9 +221,10 @@ def prior_edges(idata, *, fraction=PRIOR_EDGE_FRACTION, floor=PRIOR_EDGE_FLOOR):
     and ``q95`` the posterior's 5 % and 95 % quantiles and ``w = q95 - q05``, the posterior
     is at the lower bound when ``q05 - L <= max(fraction w, floor (U - L))``, at the upper
     bound when ``U - q95 <= max(fraction w, floor (U - L))``, and fills the prior range
-    when both hold (the data do not identify it). At a bound the data push the parameter
-    outside the prior's range: the model may be wrong for these data (or the prior too
-    narrow); the interval on that side is the prior's cut, not the data's.
+    when both hold (the data do not identify it). At a bound the data do not tell the
+    parameter from the bound, or push it beyond: either its true value is that close to the
+    bound (a pigment that hardly absorbs: ``a`` near 0), or the model is wrong for these data
+    (or the prior too narrow); the interval on that side is the prior's cut, not the data's.
 
     Parameters
     ----------
@@ -241,7 +242,9 @@ def prior_edges(idata, *, fraction=PRIOR_EDGE_FRACTION, floor=PRIOR_EDGE_FLOOR):
         the variable's other dimension), ``bound`` (``"lower"``, ``"upper"`` or ``"both"``),
         ``value`` (the bound, or ``[L, U]`` for ``"both"``), ``prior_range`` ``[L, U]``,
         ``wavelength_nm`` (the flagged wavelengths; None for a parameter shared by all
-        wavelengths) and ``text``, e.g. ``"a is at its prior bound 0 at 450-700 nm: ..."``.
+        wavelengths) and ``text``, e.g. ``"a is at its prior bound 0 at 450-700 nm: the data do not tell it from 0 or push it beyond its prior
+        range [0, 1]; unless it can truly be that close to 0, the model may be wrong for these data (or the
+        prior too narrow)"``.
     """
     wl = wavelengths(idata)
     out = []
@@ -287,9 +290,10 @@ def prior_edges(idata, *, fraction=PRIOR_EDGE_FRACTION, floor=PRIOR_EDGE_FLOOR):
                             "not identify it (its posterior is its prior)")
                 else:
                     value = prior_range[0] if bound == "lower" else prior_range[1]
-                    text = (f"{name} is at its prior bound {value:g}{at}: the data push it against the edge of "
-                            f"its prior range [{lower[k]:g}, {upper[k]:g}]; the model may be wrong for these data "
-                            "(or the prior too narrow)")
+                    text = (f"{name} is at its prior bound {value:g}{at}: the data do not tell it from {value:g} "
+                            f"or push it beyond its prior range [{lower[k]:g}, {upper[k]:g}]; unless it can truly "
+                            f"be that close to {value:g}, the model may be wrong for these data (or the prior too "
+                            "narrow)")
                 out.append({"parameter": name, "variable": variable, "label": label, "bound": bound,
                             "value": value, "prior_range": prior_range,
                             "wavelength_nm": [float(wl[i]) for i in where] if per_wavelength else None,

@@ -40,8 +40,9 @@ def test_a_piled_at_zero_is_flagged_and_a_posterior_inside_is_not():
     a = np.where(WAVELENGTHS_NM <= 500.0, half, inside)
     edges = q.prior_edges(_idata({"a": a}))
     assert [e["text"] for e in edges] == [
-        ("a is at its prior bound 0 at 400-500 nm: the data push it against the edge of its prior range "
-        "[0, 1]; the model may be wrong for these data (or the prior too narrow)")]
+        ("a is at its prior bound 0 at 400-500 nm: the data do not tell it from 0 or push it beyond its prior "
+        "range [0, 1]; unless it can truly be that close to 0, the model may be wrong for these data (or the "
+        "prior too narrow)")]
     assert edges[0]["bound"] == "lower" and edges[0]["value"] == 0.0
     assert edges[0]["wavelength_nm"] == [400.0, 450.0, 500.0]
     assert q.prior_edge_column(_idata({"a": a})) == ["a at 0", "a at 0", "a at 0", "", ""]
@@ -83,8 +84,9 @@ def test_g_at_its_upper_limit_and_g_that_fills_its_prior():
     assert texts == [
         ("g fills its whole prior range [-0.5, 0.8] at 500-600 nm: the data do not identify it (its "
         "posterior is its prior)"),
-        ("g is at its prior bound 0.8 at 400-450 nm: the data push it against the edge of its prior range "
-        "[-0.5, 0.8]; the model may be wrong for these data (or the prior too narrow)")]
+        ("g is at its prior bound 0.8 at 400-450 nm: the data do not tell it from 0.8 or push it beyond its "
+        "prior range [-0.5, 0.8]; unless it can truly be that close to 0.8, the model may be wrong for these "
+        "data (or the prior too narrow)")]
     assert q.prior_edge_column(_idata({"a": a, "g": g})) == [
         "g at 0.8", "g at 0.8", "g fills [-0.5, 0.8]", "g fills [-0.5, 0.8]", "g fills [-0.5, 0.8]"]
 
@@ -113,8 +115,9 @@ def test_a_shared_parameter_is_flagged_per_label_without_wavelengths():
                    coords={"card": ["white", "black"]})
     edges = q.prior_edges(idata)
     assert [e["text"] for e in edges] == [
-        ("r_s_factor[white] is at its prior bound 1.05263: the data push it against the edge of its prior "
-        "range [0.860708, 1.05263]; the model may be wrong for these data (or the prior too narrow)")]
+        ("r_s_factor[white] is at its prior bound 1.05263: the data do not tell it from 1.05263 or push it "
+        "beyond its prior range [0.860708, 1.05263]; unless it can truly be that close to 1.05263, the model "
+        "may be wrong for these data (or the prior too narrow)")]
     assert edges[0]["wavelength_nm"] is None and edges[0]["label"] == "white"
     assert q.prior_edge_column(idata) == [""] * WAVELENGTHS_NM.size  # not a per-wavelength parameter
 
