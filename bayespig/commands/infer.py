@@ -117,6 +117,7 @@ def run_infer(args):
     from ..report.quantities import (
         card_factors,
         posterior_predictive_check,
+        prior_edges,
         record_eps_source,
     )
     from ..report.summary_table import columns_to_csv, summary_columns
@@ -151,7 +152,8 @@ def run_infer(args):
     posterior_path = os.path.join(args.out, "posterior.nc")
     summary_path = os.path.join(args.out, "summary.csv")
     save_inference(idata, posterior_path)
-    summary = summary_columns(idata, measurements=measurements, check=check)
+    edges = prior_edges(idata)
+    summary = summary_columns(idata, measurements=measurements, check=check, edges=edges)
     with atomic_path(summary_path, suffix=".csv") as temporary:
         temporary.write_text(columns_to_csv(summary), encoding="utf-8")
     columns = [c for c in ("a_mean", "a_sd", "tau_mean", "tau_sd", "corr_a_log_tau", "a_r_hat",
@@ -177,6 +179,8 @@ def run_infer(args):
         print(f"bayespig: warning: the model cannot reproduce the measurements at {misfit.size} "
               f"wavelength(s) (posterior predictive p < {check['level']:g}): "
               + ", ".join(f"{wl[i]:g} nm (p = {check['p_value'][i]:.2g})" for i in misfit), file=sys.stderr)
+    for edge in edges:
+        print(f"bayespig: warning: {edge['text']}", file=sys.stderr)
     if flagged:
         print(f"bayespig: warning: {len(flagged)} wavelength(s) not converged (R-hat > 1.01 or "
               "ESS < 400); do not trust them:", file=sys.stderr)

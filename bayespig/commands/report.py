@@ -109,6 +109,8 @@ def _print_result(result):
             hedge = " if eps is the assumed 0.05 (pass --eps with your instrument's value)"
         print(f"colour spread of the measured samples: dE00 <= {colour['max_dE00_spread_measured']:.2f} "
               f"(95th percentile) - {verdict} for colour matching{hedge}")
+    for edge in summary.get("prior_edge") or ():
+        print(f"bayespig: warning: {edge['text']}", file=sys.stderr)
     if flags:
         print(f"{len(flags)} wavelength(s) flagged: "
               + ", ".join(f"{f['wavelength_nm']:g} nm" for f in flags), file=sys.stderr)

@@ -111,6 +111,7 @@ class CardFactors(SharedParameter):
     units = "1"
     coordinate_name = "log_r_s_factor"
     attribute = "substrate_factors"
+    prior_scale = "log"  # log f is sampled, its prior normal in log f
 
     def __init__(self, problem, card_index, relative_sd=DEFAULT_RELATIVE_SD, cards=None):
         if not (np.isfinite(relative_sd) and relative_sd > 0):

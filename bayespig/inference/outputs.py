@@ -104,6 +104,46 @@ def _versions():
             "arviz_version": arviz.__version__}
 
 
+#: InferenceData attribute with the support of every posterior variable's prior (JSON), read by
+#: the prior-edge flags (:func:`bayespig.report.quantities.prior_edges`).
+PRIOR_BOUNDS_ATTR = "prior_bounds"
+
+
+def _prior_bounds(priors, posterior, shared=()):
+    """The support of the prior of every posterior variable, for the prior-edge flags.
+
+    Parameters
+    ----------
+    priors : Priors
+    posterior : dict
+        Posterior variable name -> (dims, draws), as stored.
+    shared : sequence
+        Specs of parameters shared by all wavelengths (:class:`~bayespig.inference.shared.SharedParameter`):
+        ``variable``, ``lower``, ``upper`` (the box of its sampled coordinates), ``physical``
+        (coordinates -> stored values) and optionally ``prior_scale`` (``"linear"`` by default).
+
+    Returns
+    -------
+    dict
+        Variable -> ``{"lower", "upper", "scale"}``: the bounds in the variable's own units
+        (numbers, or lists along its one dimension other than chain, draw and wavelength,
+        e.g. ``card``) and the coordinate in which the prior is flat or sampled (``"linear"``
+        or ``"log"``).
+    """
+    ranges = {"a": (priors.a_range, "linear"), "tau": (priors.tau_range, "log"),
+              "tau_group": (priors.tau_range, "log"), "g": (priors.g_range, "linear"),
+              "eps": (priors.eps_range, "log"), "noise_floor": (priors.noise_floor_range, "log")}
+    bounds = {name: {"lower": float(low), "upper": float(high), "scale": scale}
+              for name, ((low, high), scale) in ranges.items() if name in posterior}
+    for spec in shared:
+        if getattr(spec, "variable", None) in posterior:
+            lower = np.asarray(spec.physical(np.atleast_2d(spec.lower)), dtype=float)[0]
+            upper = np.asarray(spec.physical(np.atleast_2d(spec.upper)), dtype=float)[0]
+            bounds[spec.variable] = {"lower": lower.tolist(), "upper": upper.tolist(),
+                                     "scale": getattr(spec, "prior_scale", "linear")}
+    return bounds
+
+
 def _inference_data(problem, model, results, settings, log_post0, fit, *, seed, g, eps, priors, wall_time,
                     shared=()):
     """The :class:`arviz.InferenceData` of the schema in :mod:`bayespig.inference`.
@@ -217,6 +257,7 @@ def _inference_data(problem, model, results, settings, log_post0, fit, *, seed, 
         "instruments": json.dumps(instruments, sort_keys=True),
         "n": float(problem.n),
         "parameter_names": json.dumps(parameters),
+        PRIOR_BOUNDS_ATTR: json.dumps(_prior_bounds(priors, posterior, [spec for spec, _ in shared])),
         "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "sampling_wall_time_s": float(wall_time),
         # the card factors' record is always there (null without them)

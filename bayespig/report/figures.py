@@ -106,6 +106,9 @@ def corner_figure(samples, labels, *, point=None, truth=None, title=""):
     import corner
 
     n = samples.shape[1]
+    if n == 1:  # corner's truth lines need a grid of axes: one parameter is a histogram
+        return _histogram_figure(samples[:, 0], labels[0], point=_marks(point), truth=_marks(truth),
+                                 title=title)
     fig = _figure(2.0 * n + 1.0, 2.0 * n + 1.0)
     fig.set_layout_engine(None)
     point = _marks(point)
@@ -131,6 +134,34 @@ def corner_figure(samples, labels, *, point=None, truth=None, title=""):
     fig.suptitle(title, fontsize=11, x=0.05, ha="left")
     fig.subplots_adjust(top=0.86 if n <= 2 else 0.92, bottom=0.14 if n <= 2 else 0.1,
                         left=0.16 if n <= 2 else 0.1)
+    return fig
+
+
+def _histogram_figure(draws, label, *, point=None, truth=None, title=""):
+    """The posterior of one parameter: histogram, 5/50/95 % quantiles, point fit and truth."""
+    fig = _figure(6.0, 3.2)
+    ax = fig.subplots()
+    ax.hist(draws, bins=40, color="0.35", histtype="step", lw=1.2)
+    quantiles = np.quantile(draws, [0.05, 0.5, 0.95])
+    for value in quantiles:
+        ax.axvline(value, color="k", ls="--", lw=1.0)
+    handles_labels = [("5 %, 50 %, 95 % quantiles", {"color": "k", "ls": "--", "lw": 1.0})]
+    if point is not None and point[0] is not None:
+        ax.axvline(point[0], color=_POINT_COLOUR, lw=1.5)
+        handles_labels.append(("point fit", {"color": _POINT_COLOUR, "lw": 1.5}))
+    if truth is not None and truth[0] is not None:
+        ax.axvline(truth[0], color=_TRUTH_COLOUR, lw=2.0, alpha=0.8)
+        ax.plot([truth[0]], [0.0], marker="*", ms=10, color=_TRUTH_COLOUR, clip_on=False)
+        handles_labels.append(("truth (synthetic)", {"color": _TRUTH_COLOUR, "lw": 2.0, "marker": "*", "ms": 8}))
+    from matplotlib.lines import Line2D
+
+    ax.legend(handles=[Line2D([], [], label=text, **style) for text, style in handles_labels],
+              fontsize=8, frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.set_xlabel(label)
+    ax.set_ylabel("draws")
+    ax.locator_params(axis="x", nbins=CORNER_MAX_TICKS)
+    ax.set_title(f"{title}: {label} = {quantiles[1]:.3g} [{quantiles[0]:.3g}, {quantiles[2]:.3g}]",
+                 fontsize=10, loc="left")
     return fig
 
 

@@ -1,8 +1,8 @@
 """The numbers of an uncertainty report, computed from a posterior (no plotting, no files).
 
 Everything here reads an arviz ``InferenceData`` written by :func:`bayespig.infer`
-(schema: ``posterior`` ``a``, ``tau``, optional ``tau_group``, ``g``, ``eps`` over
-``(chain, draw, wavelength)``; ``posterior_predictive``/``observed_data`` ``y`` over
+(schema: ``posterior`` ``a``, ``tau`` (absent when every film is opaque), optional
+``tau_group``, ``g``, ``eps`` over ``(chain, draw, wavelength)``; ``posterior_predictive``/``observed_data`` ``y`` over
 ``(wavelength, value)`` with the coordinates ``sample``, ``channel``, ``kind``,
 ``film_group`` along ``value``; ``constant_data`` ``r_s``, ``eps``, ``point_a``,
 ``point_tau``) and turns it into plain arrays and dicts:
@@ -12,6 +12,8 @@ Everything here reads an arviz ``InferenceData`` written by :func:`bayespig.infe
   when thickness ``H`` and concentration ``D`` are known (paper appendix A2; only
   ``D sigma_ext`` matters, so ``sigma_ext`` is in the user's concentration units);
 * convergence diagnostics (bulk ESS and rank-normalised R-hat, arviz) and flagged wavelengths;
+* prior edges: the parameters whose posterior is piled against a bound of its prior's support
+  (:func:`prior_edges`, over the supports that :func:`bayespig.infer` records);
 * fit quality: residuals of every measured value in units of its relative error ``eps``
   (paper eq. 7: ``(x_obs - x_model) / (eps x_model)`` is standard normal at the truth), and
   a posterior predictive check that flags the wavelengths the model cannot reproduce;
@@ -37,6 +39,7 @@ import numpy as np
 
 from .. import colorimetry
 from ..data.model import BLACK_SUBSTRATE_ALBEDO, WHITE_SUBSTRATE_ALBEDO, parse_measurement_geometry
+from ..inference.outputs import PRIOR_BOUNDS_ATTR
 from ..instruments import Channel, Instrument
 from ..likelihood import FilmTerm, Priors, Problem, noise_sd
 
@@ -46,6 +49,9 @@ __all__ = [
     "EPS_SOURCE_ATTR",
     "ESS_MIN",
     "PPC_LEVEL",
+    "PRIOR_BOUNDS_ATTR",
+    "PRIOR_EDGE_FLOOR",
+    "PRIOR_EDGE_FRACTION",
     "RHAT_MAX",
     "SPREAD_QUANTILE",
     "FilmDesign",
@@ -70,6 +76,9 @@ __all__ = [
     "posterior_draws",
     "posterior_predictive_check",
     "predicted_film_values",
+    "prior_bounds",
+    "prior_edge_column",
+    "prior_edges",
     "priors_from_inference",
     "problem_from_inference",
     "provenance",
@@ -90,6 +99,16 @@ COLOUR_MATCH_DELTA_E = 1.0
 #: Posterior predictive p-value below which a wavelength is flagged as a misfit: the model,
 #: at any plausible parameters, cannot reproduce the measured values within their noise.
 PPC_LEVEL = 0.01
+#: A posterior is piled against a bound of its prior when its 5 % (95 %) quantile lies closer
+#: to the lower (upper) bound than this fraction of its 90 % interval's width, in the
+#: coordinate where the prior is flat or sampled (:func:`prior_edges`). For a normal
+#: likelihood cut by the bound this is when the cut lies within 1.5 sd of the likelihood's
+#: peak (the density at the bound is at least a third of its peak); a posterior equal to a
+#: flat prior has 0.05 / 0.9 = 0.056 at both ends.
+PRIOR_EDGE_FRACTION = 0.1
+#: ... or closer than this fraction of the prior's range (a posterior far narrower than its
+#: distance to the bound, pressed against it).
+PRIOR_EDGE_FLOOR = 1e-6
 #: Central credible intervals shown everywhere, as (lower, upper) quantiles.
 BANDS = {"50": (0.25, 0.75), "90": (0.05, 0.95)}
 #: Colour spread quantile: ``Delta E00`` of posterior draws from the posterior-mean colour.
@@ -152,6 +171,161 @@ def priors_from_inference(idata):
                 if match:
                     ranges[name] = (float(match.group(1)), float(match.group(2)))
     return Priors(**ranges)
+
+
+def prior_bounds(idata):
+    """The support of the prior of every posterior variable.
+
+    Reads the :data:`PRIOR_BOUNDS_ATTR` attribute that :func:`bayespig.infer` records; a
+    posterior written before it existed gets the ranges of :func:`priors_from_inference` for
+    ``a``, ``tau`` (and ``tau_group``), ``g`` and ``eps``.
+
+    Returns
+    -------
+    dict
+        Posterior variable -> ``{"lower", "upper", "scale"}``: bounds in the variable's units
+        (numbers or lists along its non-wavelength dimension) and ``"linear"`` or ``"log"``,
+        the coordinate in which the prior is flat or sampled. Only variables of the posterior.
+    """
+    recorded = _json_attr(_attrs(idata).get(PRIOR_BOUNDS_ATTR))
+    if not isinstance(recorded, dict):
+        priors = priors_from_inference(idata)
+        recorded = {"a": {"lower": priors.a_range[0], "upper": priors.a_range[1], "scale": "linear"},
+                    "tau": {"lower": priors.tau_range[0], "upper": priors.tau_range[1], "scale": "log"},
+                    "tau_group": {"lower": priors.tau_range[0], "upper": priors.tau_range[1], "scale": "log"},
+                    "g": {"lower": priors.g_range[0], "upper": priors.g_range[1], "scale": "linear"},
+                    "eps": {"lower": priors.eps_range[0], "upper": priors.eps_range[1], "scale": "log"}}
+    return {name: dict(value) for name, value in recorded.items()
+            if name in idata.posterior and isinstance(value, dict) and {"lower", "upper"} <= set(value)}
+
+
+def _wavelength_runs(wl, indices):
+    """Wavelengths ``wl[indices]`` as runs of consecutive grid points: ``"400, 450-550 nm"``."""
+    runs, start = [], None
+    for position, i in enumerate(indices):
+        if start is None:
+            start = i
+        if position + 1 == len(indices) or indices[position + 1] != i + 1:
+            runs.append(f"{wl[start]:g}" if start == i else f"{wl[start]:g}-{wl[i]:g}")
+            start = None
+    return ", ".join(runs) + " nm"
+
+
+def prior_edges(idata, *, fraction=PRIOR_EDGE_FRACTION, floor=PRIOR_EDGE_FLOOR):
+    """Parameters whose posterior is piled against a bound of its prior's support.
+
+    For every posterior variable with recorded bounds ``[L, U]`` (:func:`prior_bounds`), at
+    every wavelength (and label of its other dimension, e.g. every card), in the coordinate
+    ``x`` where the prior is flat or sampled (``log`` for ``tau`` and ``eps``): with ``q05``
+    and ``q95`` the posterior's 5 % and 95 % quantiles and ``w = q95 - q05``, the posterior
+    is at the lower bound when ``q05 - L <= max(fraction w, floor (U - L))``, at the upper
+    bound when ``U - q95 <= max(fraction w, floor (U - L))``, and fills the prior range
+    when both hold (the data do not identify it). At a bound the data do not tell the
+    parameter from the bound, or push it beyond: either its true value is that close to the
+    bound (a pigment that hardly absorbs: ``a`` near 0), or the model is wrong for these data
+    (or the prior too narrow); the interval on that side is the prior's cut, not the data's.
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+    fraction : float
+        :data:`PRIOR_EDGE_FRACTION`.
+    floor : float
+        :data:`PRIOR_EDGE_FLOOR`.
+
+    Returns
+    -------
+    list of dict
+        One per (parameter, bound) with ``parameter`` (e.g. ``"a"``, ``"tau[thick]"``,
+        ``"r_s_factor[white card]"``), ``variable``, ``label`` (None or the coordinate along
+        the variable's other dimension), ``bound`` (``"lower"``, ``"upper"`` or ``"both"``),
+        ``value`` (the bound, or ``[L, U]`` for ``"both"``), ``prior_range`` ``[L, U]``,
+        ``wavelength_nm`` (the flagged wavelengths; None for a parameter shared by all
+        wavelengths) and ``text``, e.g. ``"a is at its prior bound 0 at 450-700 nm: the data do not tell it from 0 or push it beyond its prior
+        range [0, 1]; unless it can truly be that close to 0, the model may be wrong for these data (or the
+        prior too narrow)"``.
+    """
+    wl = wavelengths(idata)
+    out = []
+    for variable, bounds in prior_bounds(idata).items():
+        data = idata.posterior[variable]
+        other = [d for d in data.dims if d not in ("chain", "draw", "wavelength")]
+        if len(other) > 1:
+            continue
+        per_wavelength = "wavelength" in data.dims
+        order = ["chain", "draw"] + (["wavelength"] if per_wavelength else []) + other
+        values = np.asarray(data.transpose(*order).values, dtype=float)
+        values = values.reshape((-1,) + values.shape[2:])
+        if not per_wavelength:
+            values = values[:, None]
+        if not other:
+            values = values[..., None]
+        labels = [None] if not other else [str(v) for v in data.coords[other[0]].values]
+        lower = np.broadcast_to(np.asarray(bounds["lower"], dtype=float), (len(labels),))
+        upper = np.broadcast_to(np.asarray(bounds["upper"], dtype=float), (len(labels),))
+        log = bounds.get("scale") == "log"
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = np.log(values) if log else values
+            low, high = (np.log(lower), np.log(upper)) if log else (lower, upper)
+        q05, q95 = np.quantile(x, [0.05, 0.95], axis=0)  # (n_wavelengths or 1, n_labels)
+        margin = np.maximum(fraction * (q95 - q05), floor * (high - low))
+        at_lower = q05 - low <= margin
+        at_upper = high - q95 <= margin
+        for k, label in enumerate(labels):
+            if variable == "tau_group" and k == 0:
+                continue  # the first group's tau is "tau"
+            name = variable if label is None else f"{'tau' if variable == 'tau_group' else variable}[{label}]"
+            prior_range = [float(lower[k]), float(upper[k])]
+            for bound, mask in (("both", at_lower[:, k] & at_upper[:, k]),
+                                ("lower", at_lower[:, k] & ~at_upper[:, k]),
+                                ("upper", at_upper[:, k] & ~at_lower[:, k])):
+                where = np.flatnonzero(mask)
+                if not where.size:
+                    continue
+                at = f" at {_wavelength_runs(wl, where)}" if per_wavelength else ""
+                if bound == "both":
+                    value = prior_range
+                    text = (f"{name} fills its whole prior range [{lower[k]:g}, {upper[k]:g}]{at}: the data do "
+                            "not identify it (its posterior is its prior)")
+                else:
+                    value = prior_range[0] if bound == "lower" else prior_range[1]
+                    text = (f"{name} is at its prior bound {value:g}{at}: the data do not tell it from {value:g} "
+                            f"or push it beyond its prior range [{lower[k]:g}, {upper[k]:g}]; unless it can truly "
+                            f"be that close to {value:g}, the model may be wrong for these data (or the prior too "
+                            "narrow)")
+                out.append({"parameter": name, "variable": variable, "label": label, "bound": bound,
+                            "value": value, "prior_range": prior_range,
+                            "wavelength_nm": [float(wl[i]) for i in where] if per_wavelength else None,
+                            "text": text})
+    return out
+
+
+def prior_edge_column(idata, edges=None):
+    """Per wavelength, the parameters at a prior bound in a few words (``summary.csv``).
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+    edges : list of dict, optional
+        :func:`prior_edges` of ``idata`` (computed when not given).
+
+    Returns
+    -------
+    list of str
+        ``""`` (none) or e.g. ``"a at 0; g fills [-0.5, 0.8]"``; parameters shared by all
+        wavelengths are not listed (see :func:`prior_edges`).
+    """
+    wl = wavelengths(idata)
+    edges = prior_edges(idata) if edges is None else edges
+    cells = {float(w): [] for w in wl}
+    for edge in edges:
+        if edge["wavelength_nm"] is None:
+            continue
+        words = (f"{edge['parameter']} fills [{edge['value'][0]:g}, {edge['value'][1]:g}]"
+                 if edge["bound"] == "both" else f"{edge['parameter']} at {edge['value']:g}")
+        for w in edge["wavelength_nm"]:
+            cells[float(w)].append(words)
+    return ["; ".join(cells[float(w)]) for w in wl]
 
 
 def wavelengths(idata):
@@ -378,7 +552,7 @@ def diagnostics(idata, variables=None, *, rhat_max=RHAT_MAX, ess_min=ESS_MIN, pr
         from ..inference import diagnose
     except ImportError:  # pragma: no cover - the inference layer ships with the package
         diagnose = None
-    if diagnose is not None and "tau" in posterior:
+    if diagnose is not None:
         for line in diagnose(idata, rhat_max=rhat_max, ess_min=ess_min, warn=False):
             head, _, reasons = line.partition(" nm: ")
             flags.setdefault(float(head), []).extend(reasons.split("; "))
@@ -876,12 +1050,15 @@ class FilmDesign:
 
 def default_unmeasured_films(problem):
     """Opaque; the measured film group at twice and half its ``tau`` on black and white; and
-    the film on the substrate it was not measured on (e.g. white for method 3)."""
+    the film on the substrate it was not measured on (e.g. white for method 3). Only the opaque
+    film when every film is opaque (no ``tau`` to scale)."""
     group = problem.groups[0] if problem.groups else None
     measured_r_s = [float(np.median(f.r_s)) for f in problem.films
                     if f.kind == "reflectance" and f.group == group and group is not None]
     films = [FilmDesign("opaque (hiding)", np.inf, 0.0, measured=any(f.opaque for f in problem.films
                                                                      if f.kind == "reflectance"))]
+    if group is None:
+        return films
     for name, r_s in (("black", BLACK_SUBSTRATE_ALBEDO), ("white", WHITE_SUBSTRATE_ALBEDO)):
         if not any(abs(m - r_s) < 0.02 for m in measured_r_s):
             films.append(FilmDesign(f"1 x tau on {name}", 1.0, r_s))
@@ -926,7 +1103,13 @@ def predicted_film_values(idata, films, *, instrument=None, max_draws=400, table
     table = tables.get(g_kind) or load_table(instrument, g=g_kind, n=problem.n, progress=False)
     tables[g_kind] = table
     a = posterior_draws(idata, "a", max_draws)
-    tau = posterior_draws(idata, "tau", max_draws)
+    if "tau" in idata.posterior:
+        tau = posterior_draws(idata, "tau", max_draws)
+    elif all(not np.isfinite(film.tau_scale) for film in films):
+        tau = np.full(a.shape, np.inf)  # opaque films need no tau
+    else:
+        raise ValueError("films: the posterior has no tau (every measured film is opaque), so only opaque "
+                         "films (tau_scale = inf) can be predicted")
     g = posterior_draws(idata, "g", max_draws) if g_kind == "free" else np.zeros_like(a)
     out = np.empty((len(films), a.shape[0], a.shape[1], len(instrument)))
     for j, film in enumerate(films):

@@ -17,6 +17,11 @@ inferred):
     Posterior correlation of ``a`` and ``log tau``.
 ``point_a``, ``point_tau``
     The least-squares point fit (the paper's procedure).
+
+A parameter the posterior does not have has no columns: when every film is opaque (hides its
+substrate) ``tau`` is not identified and not a parameter, so the ``tau_*``, ``corr_a_log_tau``,
+``point_tau``, ``k_ext_*`` and ``sigma_ext_*`` columns are absent (not empty); the other
+columns are the same.
 ``k_ext_*``, ``sigma_ext_*``
     Only when the film's thickness (and concentration) are known: the extinction coefficient
     ``tau / H`` [1/µm] and cross-section ``tau / (H D)`` (mean, sd, median, ci90 low/high).
@@ -24,6 +29,11 @@ inferred):
     The posterior predictive check (:func:`~bayespig.report.quantities.posterior_predictive_check`):
     its p-value and its verdict: ``pass``, ``misfit (p < 0.01)`` or, where a wavelength has no
     more values than parameters and nothing is flagged, ``not testable (2 values <= 2 parameters)``.
+``prior_edge``
+    The parameters whose posterior is piled against a bound of its prior at the wavelength
+    (:func:`~bayespig.report.quantities.prior_edges`), ``; ``-separated: ``a at 0`` (at the
+    bound 0: the data push it outside the prior's range), ``g fills [-0.5, 0.8]`` (the whole
+    range: not identified); empty: none.
 ``flags``
     Convergence and identification problems of the wavelength, ``; ``-separated (empty: none).
 
@@ -71,7 +81,7 @@ def _parameters(idata):
     return out
 
 
-def summary_columns(idata, *, measurements=None, check=None, diagnostics=None):
+def summary_columns(idata, *, measurements=None, check=None, diagnostics=None, edges=None):
     """The columns of ``summary.csv``, in order.
 
     Parameters
@@ -85,12 +95,14 @@ def summary_columns(idata, *, measurements=None, check=None, diagnostics=None):
         when not given).
     diagnostics : dict, optional
         :func:`~bayespig.report.quantities.diagnostics` of ``idata`` (computed when not given).
+    edges : list of dict, optional
+        :func:`~bayespig.report.quantities.prior_edges` of ``idata`` (computed when not given).
 
     Returns
     -------
     dict
-        Column name -> array (n_wavelengths,) of numbers, or list of str for ``model_check``
-        and ``flags``.
+        Column name -> array (n_wavelengths,) of numbers, or list of str for ``model_check``,
+        ``prior_edge`` and ``flags``.
     """
     import arviz as az
 
@@ -118,7 +130,7 @@ def summary_columns(idata, *, measurements=None, check=None, diagnostics=None):
         with np.errstate(invalid="ignore", divide="ignore"):
             columns["corr_a_log_tau"] = (da * dt).sum(axis=0) / np.sqrt((da * da).sum(axis=0) * (dt * dt).sum(axis=0))
     constant = getattr(idata, "constant_data", None)
-    for name in ("a", "tau"):
+    for name in ("a", "tau") if "tau" in idata.posterior else ("a",):
         columns[f"point_{name}"] = (np.asarray(constant[f"point_{name}"].values, dtype=float)
                                     if constant is not None and f"point_{name}" in constant
                                     else np.full(wl.size, np.nan))
@@ -126,6 +138,7 @@ def summary_columns(idata, *, measurements=None, check=None, diagnostics=None):
     check = check if check is not None else q.posterior_predictive_check(idata)
     columns["ppc_p_value"] = check["p_value"]
     columns["model_check"] = q.model_check_status(check)
+    columns["prior_edge"] = q.prior_edge_column(idata, edges)
     diagnostics = diagnostics if diagnostics is not None else q.diagnostics(idata)
     flagged = {f["wavelength_nm"]: "; ".join(f["reasons"]) for f in diagnostics["flags"]
                if f["wavelength_nm"] is not None}

@@ -15,7 +15,13 @@ measurement file, inferred first) and writes into ``out_dir``:
     model check, flags.
 ``summary.json``
     The same numbers plus colour, fit quality and model check (the wavelengths the model
-    cannot reproduce), predicted films, diagnostics and provenance.
+    cannot reproduce), the prior edges (``prior_edge``: parameters piled against a bound of
+    their prior, :func:`~bayespig.report.quantities.prior_edges`), predicted films,
+    diagnostics and provenance.
+
+A posterior of opaque films only (no ``tau``) gets the same report without what needs ``tau``
+(its bands and columns, extinction, the ravine, films other than the opaque one), and says why
+(:data:`OPAQUE_ONLY_TEXT`).
 ``posterior.nc``
     The posterior itself (netCDF), so the report's numbers can be recomputed.
 
@@ -52,6 +58,17 @@ __all__ = ["NETCDF_SUFFIXES", "REPORT_FILES", "ReportResult", "check_report_fold
 
 #: Wavelengths [nm] near which corner plots are drawn by default.
 CORNER_WAVELENGTHS_NM = (450.0, 550.0, 650.0)
+#: What the report says when every film is opaque (a posterior without ``tau``).
+OPAQUE_ONLY_TEXT = (
+    "Every measured film hides its substrate, so its reflectance depends on a (and g when free) "
+    "only: the optical thickness tau is not identified by these measurements and is not a parameter "
+    "- this report has no tau, no extinction and no ravine. To measure tau too, add a film that does "
+    "not hide its substrate (e.g. the same paint on black: the paper's method 2).")
+#: What the report says before the list of parameters at a bound of their prior.
+PRIOR_EDGE_TEXT = (
+    "Where a posterior is piled against a bound of its prior (its 5 % or 95 % quantile closer to the "
+    "bound than a tenth of its 90 % interval), that side of its interval is the prior's cut, not the "
+    "data's:")
 #: Draws used for colour and predictions of unmeasured films (evenly thinned).
 MAX_COLOUR_DRAWS = 400
 #: Draws shown in corner plots and the ravine figure.
@@ -338,9 +355,7 @@ def _say(progress, message):
 def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengths,
            ravine_wavelength, films, max_colour_draws, progress):
     """Every number, figure and block of the report (nothing written yet)."""
-    if "tau" not in idata.posterior:
-        raise ValueError("the posterior has no tau: every film is opaque, so only a is inferred; "
-                         "the report needs at least one film that does not hide its substrate")
+    has_tau = "tau" in idata.posterior  # False: every film is opaque, tau is not a parameter
     wl = q.wavelengths(idata)
     problem = q.problem_from_inference(idata)
     priors = q.priors_from_inference(idata)
@@ -358,8 +373,10 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     # ---- parameters
     _say(progress, "parameters")
     a = q.posterior_draws(idata, "a")
-    tau = q.posterior_draws(idata, "tau")
-    bands = {"a": q.parameter_bands(a), "tau": q.parameter_bands(tau)}
+    tau = q.posterior_draws(idata, "tau") if has_tau else None
+    bands = {"a": q.parameter_bands(a)}
+    if has_tau:
+        bands["tau"] = q.parameter_bands(tau)
     groups = list(problem.groups)
     if "tau_group" in idata.posterior and len(groups) > 1:
         tau_groups = q.posterior_draws(idata, "tau_group")
@@ -369,20 +386,23 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         if name in idata.posterior:
             draws = q.posterior_draws(idata, name)
             bands[name] = q.parameter_bands(draws.reshape(draws.shape[0], wl.size, -1)[..., 0])
-    corr = _correlation(a, np.log(tau))
+    corr = _correlation(a, np.log(tau)) if has_tau else None
     constant = getattr(idata, "constant_data", None)
     point = {name: (np.asarray(constant[f"point_{name}"].values, dtype=float)
                     if constant is not None and f"point_{name}" in constant else np.full(wl.size, np.nan))
              for name in ("a", "tau")}
-    extinction = _extinction(measurements, problem, tau)
+    extinction = _extinction(measurements, problem, tau) if has_tau else {}
     diag = q.diagnostics(idata, priors=priors)
 
     blocks.append(doc.heading(title, 1))
-    intro = (f"Posterior, per wavelength, of the relative absorption a = 1 - albedo and the optical "
-             f"thickness tau{' and the phase parameter g' if 'g' in bands else ''}: "
+    intro = ("Posterior, per wavelength, of the relative absorption a = 1 - albedo"
+             + (" and the optical thickness tau" if has_tau else "")
+             + f"{' and the phase parameter g' if 'g' in bands else ''}: "
              f"{wl.size} wavelengths {wl[0]:g}-{wl[-1]:g} nm, from {len(problem.films)} measured "
              f"film spectra ({problem.n_values} values per wavelength), {prov.get('method', problem.method)}.")
     blocks.append(doc.paragraph(intro))
+    if not has_tau:
+        blocks.append(doc.paragraph(OPAQUE_ONLY_TEXT, lead="Opaque films only."))
     if synthetic:
         blocks.append(doc.paragraph(f"SYNTHETIC DATA - {synthetic}: the measurements were simulated; "
                                     "red lines and stars mark the true values."))
@@ -405,11 +425,15 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     glance_idx = _nearest_indices(wl, CORNER_WAVELENGTHS_NM)
     rows = []
     for i in glance_idx:
-        row = [f"{wl[i]:g}", _interval(bands["a"], i), _interval(bands["tau"], i), _fmt(corr[i], 2)]
+        row = [f"{wl[i]:g}", _interval(bands["a"], i)]
+        if has_tau:
+            row += [_interval(bands["tau"], i), _fmt(corr[i], 2)]
         if "g" in bands:
             row.append(_interval(bands["g"], i))
         rows.append(row)
-    header = ["wavelength [nm]", "a median [90 %]", "tau median [90 %]", "corr(a, log tau)"]
+    header = ["wavelength [nm]", "a median [90 %]"]
+    if has_tau:
+        header += ["tau median [90 %]", "corr(a, log tau)"]
     if "g" in bands:
         header.append("g median [90 %]")
     blocks.append(doc.table(header, rows))
@@ -449,13 +473,20 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
             "Model check: the model reproduces the measurements within their noise at every "
             + ("testable " if untestable.size else "") + "wavelength "
             f"(posterior predictive p >= {check['level']:g})." + (" " + untestable_text if untestable_text else "")))
+    edges = q.prior_edges(idata)
+    if edges:
+        blocks.append(doc.paragraph(PRIOR_EDGE_TEXT, lead="Prior edge."))
+        blocks.append(doc.bullets([edge["text"] + "." for edge in edges]))
+    else:
+        blocks.append(doc.paragraph("Prior edge: no posterior is piled against a bound of its prior."))
     colour_slot = len(blocks)  # the colour verdict goes here once computed
 
     blocks.append(doc.heading("Optical properties"))
     panels = [{"bands": bands["a"], "label": "a = 1 - albedo", "point": point["a"],
-               "truth": truth["a"] if truth else None},
-              {"bands": bands["tau"], "label": "optical thickness tau", "point": point["tau"],
-               "truth": truth["tau"] if truth else None, "log": True}]
+               "truth": truth["a"] if truth else None}]
+    if has_tau:
+        panels.append({"bands": bands["tau"], "label": "optical thickness tau", "point": point["tau"],
+                       "truth": truth["tau"] if truth else None, "log": True})
     for group in groups[1:]:
         panels.append({"bands": bands[f"tau[{group}]"], "label": f"tau [{group}]", "log": True})
     if "g" in bands:
@@ -467,8 +498,9 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     add_figure("parameters", figs.parameter_figure(wl, panels),
                "Posterior median (line) with 50 % and 90 % central intervals (bands); + point fit"
                + (" (at g = 0, the start of the sampler)" if "g" in bands else "")
-               + ("; red line with stars: truth of the synthetic pigment" if truth else "") + ". tau is the optical "
-               f"thickness of film group '{groups[0] if groups else 'n/a'}'.")
+               + ("; red line with stars: truth of the synthetic pigment" if truth else "") + "."
+               + (f" tau is the optical thickness of film group '{groups[0] if groups else 'n/a'}'." if has_tau
+                  else " Every film is opaque: no tau."))
     factors = q.card_factors(idata)
     if factors:
         blocks.append(doc.paragraph(
@@ -494,25 +526,33 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
                                "log": True})
         add_figure("extinction", figs.parameter_figure(wl, ext_panels),
                    "Extinction coefficient (and cross-section) with 50 % and 90 % intervals (appendix A2).")
-    header = ["wavelength [nm]", "a median", "a 5 %", "a 95 %", "tau median", "tau 5 %", "tau 95 %",
-              "corr(a, log tau)", "point a", "point tau"]
-    rows = [[f"{w:g}", _fmt(bands["a"]["median"][i]), _fmt(bands["a"]["q05"][i]), _fmt(bands["a"]["q95"][i]),
-             _fmt(bands["tau"]["median"][i]), _fmt(bands["tau"]["q05"][i]), _fmt(bands["tau"]["q95"][i]),
-             _fmt(corr[i], 2), _fmt(point["a"][i]), _fmt(point["tau"][i])] for i, w in enumerate(wl)]
+    if has_tau:
+        header = ["wavelength [nm]", "a median", "a 5 %", "a 95 %", "tau median", "tau 5 %", "tau 95 %",
+                  "corr(a, log tau)", "point a", "point tau"]
+        rows = [[f"{w:g}", _fmt(bands["a"]["median"][i]), _fmt(bands["a"]["q05"][i]), _fmt(bands["a"]["q95"][i]),
+                 _fmt(bands["tau"]["median"][i]), _fmt(bands["tau"]["q05"][i]), _fmt(bands["tau"]["q95"][i]),
+                 _fmt(corr[i], 2), _fmt(point["a"][i]), _fmt(point["tau"][i])] for i, w in enumerate(wl)]
+    else:
+        header = ["wavelength [nm]", "a median", "a 5 %", "a 95 %", "point a"]
+        rows = [[f"{w:g}", _fmt(bands["a"]["median"][i]), _fmt(bands["a"]["q05"][i]), _fmt(bands["a"]["q95"][i]),
+                 _fmt(point["a"][i])] for i, w in enumerate(wl)]
     blocks.append(doc.table(header, rows))
 
     # ---- posterior shape: corner plots and the ravine
     _say(progress, "corner plots and ravine")
     blocks.append(doc.heading("Posterior shape"))
     blocks.append(doc.paragraph(
-        "Corner plots show the joint posterior at single wavelengths: a long, tilted cloud means "
-        "the data constrain a combination of parameters better than each one - the paper's "
-        "'ravine'. Blue lines: point fit (least squares, the paper's procedure); black dashes: the 5 %, "
+        ("Corner plots show the joint posterior at single wavelengths: a long, tilted cloud means "
+         "the data constrain a combination of parameters better than each one - the paper's "
+         "'ravine'. " if has_tau else
+         "Corner plots show the posterior of the parameters that exist at single wavelengths (every film "
+         "is opaque: no tau, so no ravine). ")
+        + "Blue lines: point fit (least squares, the paper's procedure); black dashes: the 5 %, "
         "50 % and 95 % quantiles; red lines and star: the truth of a synthetic pigment; contours at "
         "50 % and 90 %; titles give the median and the 5 %/95 % quantiles."))
     a_plot = q.posterior_draws(idata, "a", MAX_PLOT_DRAWS)
-    tau_plot = q.posterior_draws(idata, "tau", MAX_PLOT_DRAWS)
-    columns = [(a_plot, "a"), (np.log10(tau_plot), "log10 tau")]
+    tau_plot = q.posterior_draws(idata, "tau", MAX_PLOT_DRAWS) if has_tau else None
+    columns = [(a_plot, "a")] + ([(np.log10(tau_plot), "log10 tau")] if has_tau else [])
     if len(groups) > 1:
         tg = q.posterior_draws(idata, "tau_group", MAX_PLOT_DRAWS)
         columns += [(np.log10(tg[..., k]), f"log10 tau[{g}]") for k, g in enumerate(groups) if k > 0]
@@ -524,40 +564,48 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     for i in _nearest_indices(wl, corner_wavelengths or ()):
         samples = np.column_stack([c[0][:, i] for c in columns])
         labels = [c[1] for c in columns]
-        pt = [point["a"][i], np.log10(point["tau"][i])] + [None] * (len(columns) - 2)
+        first = [point["a"][i]] + ([np.log10(point["tau"][i])] if has_tau else [])
+        pt = first + [None] * (len(columns) - len(first))
         tr = None
-        if truth and truth["tau"] is not None:
-            tr = [truth["a"][i], np.log10(truth["tau"][i])] + [None] * (len(columns) - 2)
+        if truth and (truth["tau"] is not None or not has_tau):
+            first = [truth["a"][i]] + ([np.log10(truth["tau"][i])] if has_tau else [])
+            tr = first + [None] * (len(columns) - len(first))
             if "g" in labels and truth.get("g") is not None:
                 tr[labels.index("g")] = float(truth["g"])
         add_figure(f"corner_{wl[i]:g}nm",
                    figs.corner_figure(samples, labels, point=pt, truth=tr, title=f"{wl[i]:g} nm"),
                    f"Joint posterior at {wl[i]:g} nm" + (" (red: truth)" if tr else "") + ".")
 
-    sd_log_tau = np.log(tau).std(axis=0)
-    r_index = (int(np.argmax(sd_log_tau)) if ravine_wavelength is None
-               else _nearest_indices(wl, [ravine_wavelength])[0])
-    from ..likelihood import ForwardModel
+    r_index = None
+    if not has_tau:
+        blocks.append(doc.paragraph(
+            "No ravine figure: it shows the log-likelihood over (a, tau), and every film here is opaque, "
+            "so tau is not a parameter."))
+    else:
+        sd_log_tau = np.log(tau).std(axis=0)
+        r_index = (int(np.argmax(sd_log_tau)) if ravine_wavelength is None
+                   else _nearest_indices(wl, [ravine_wavelength])[0])
+        from ..likelihood import ForwardModel
 
-    model = ForwardModel(problem, "free" if "g" in idata.posterior else "isotropic")
-    wide = q.ravine(idata, r_index, problem=problem, model=model, n_grid=151)
-    zoom = q.ravine(idata, r_index, problem=problem, model=model, n_grid=121,
-                    a_limits=_zoom_limits(a_plot[:, r_index], *priors.a_range),
-                    tau_limits=_zoom_limits(tau_plot[:, r_index], *priors.tau_range, log=True))
-    held = ", ".join(f"{k} = {v:.3g}" for k, v in wide.held.items())
-    blocks.append(doc.paragraph(
-        "The ravine: the log-likelihood (eq. 7) over (a, tau) at one wavelength, with posterior "
-        "draws over it. Where the measurements cannot separate absorption from thickness the "
-        "high-likelihood region is a long curved valley and the posterior follows it; a compact "
-        "island means both are identified. White contours: 1, 2, 3 sigma of a 2-D Gaussian "
-        "(Delta log L = -1.15, -3.09, -5.91)."
-        + (f" Held at posterior medians: {held}." if held else "")))
-    rt = (truth["a"][r_index], truth["tau"][r_index]) if truth and truth["tau"] is not None else None
-    add_figure("ravine", figs.ravine_figure(wide, zoom, a_plot[:, r_index], tau_plot[:, r_index],
-                                            point=(point["a"][r_index], point["tau"][r_index]), truth=rt),
-               f"Log-likelihood landscape at {wl[r_index]:g} nm"
-               + (" (the widest tau posterior of the spectrum)" if ravine_wavelength is None else "")
-               + "; left the whole prior box, right a zoom on the posterior.")
+        model = ForwardModel(problem, "free" if "g" in idata.posterior else "isotropic")
+        wide = q.ravine(idata, r_index, problem=problem, model=model, n_grid=151)
+        zoom = q.ravine(idata, r_index, problem=problem, model=model, n_grid=121,
+                        a_limits=_zoom_limits(a_plot[:, r_index], *priors.a_range),
+                        tau_limits=_zoom_limits(tau_plot[:, r_index], *priors.tau_range, log=True))
+        held = ", ".join(f"{k} = {v:.3g}" for k, v in wide.held.items())
+        blocks.append(doc.paragraph(
+            "The ravine: the log-likelihood (eq. 7) over (a, tau) at one wavelength, with posterior "
+            "draws over it. Where the measurements cannot separate absorption from thickness the "
+            "high-likelihood region is a long curved valley and the posterior follows it; a compact "
+            "island means both are identified. White contours: 1, 2, 3 sigma of a 2-D Gaussian "
+            "(Delta log L = -1.15, -3.09, -5.91)."
+            + (f" Held at posterior medians: {held}." if held else "")))
+        rt = (truth["a"][r_index], truth["tau"][r_index]) if truth and truth["tau"] is not None else None
+        add_figure("ravine", figs.ravine_figure(wide, zoom, a_plot[:, r_index], tau_plot[:, r_index],
+                                                point=(point["a"][r_index], point["tau"][r_index]), truth=rt),
+                   f"Log-likelihood landscape at {wl[r_index]:g} nm"
+                   + (" (the widest tau posterior of the spectrum)" if ravine_wavelength is None else "")
+                   + "; left the whole prior box, right a zoom on the posterior.")
 
     # ---- fit quality
     _say(progress, "fit quality")
@@ -637,12 +685,18 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
                                   max_draws=max_colour_draws)
         blocks.append(doc.heading("Predicted films", 3))
         instrument_labels = list(dict.fromkeys(p["channel"] for p in predicted))
-        blocks.append(doc.paragraph(
-            "Colour of films made with this pigment that were not measured, predicted from the "
-            f"posterior through the forward model at the geometries {', '.join(instrument_labels)}; "
-            "'x tau' scales the optical thickness of film group "
-            f"'{groups[0] if groups else 'n/a'}' (a thicker or thinner drawdown at the same "
-            "concentration), black and white substrates have r_s = 0.01 and 0.95."))
+        if has_tau:
+            blocks.append(doc.paragraph(
+                "Colour of films made with this pigment that were not measured, predicted from the "
+                f"posterior through the forward model at the geometries {', '.join(instrument_labels)}; "
+                "'x tau' scales the optical thickness of film group "
+                f"'{groups[0] if groups else 'n/a'}' (a thicker or thinner drawdown at the same "
+                "concentration), black and white substrates have r_s = 0.01 and 0.95."))
+        else:
+            blocks.append(doc.paragraph(
+                "The colour of the opaque (hiding) film, predicted from the posterior through the forward "
+                f"model at the geometries {', '.join(instrument_labels)}. Films that do not hide their "
+                "substrate cannot be predicted: tau is not known."))
         blocks.append(doc.table(
             ["film", "geometry", "L* a* b*", "dE00 spread (95 %)"],
             [[p["film"] + (" (measured)" if p["measured"] else ""), p["channel"], _lab(p["Lab"]),
@@ -654,7 +708,8 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
             [{"label": film, "colours": [p["sRGB"] for p in ps],
               "text": f"max spread {max(p['dE00_spread'] for p in ps):.2f}"} for film, ps in per_film.items()],
             title="predicted films, one swatch per geometry: " + ", ".join(instrument_labels)),
-            "Predicted colour of unmeasured films (posterior mean), one swatch per geometry.")
+            ("Predicted colour of unmeasured films" if has_tau else "Predicted colour of the opaque film")
+            + " (posterior mean), one swatch per geometry.")
         spreads = [m["dE00_spread"] for m in measured] + [p["dE00_spread"] for p in predicted]
         worst_measured = max((m["dE00_spread"] for m in measured), default=np.nan)
         verdict = bool(worst_measured < q.COLOUR_MATCH_DELTA_E)
@@ -689,7 +744,8 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         blocks.append(doc.paragraph("No wavelength flagged."))
 
     blocks.append(doc.heading("Priors, settings and provenance"))
-    blocks.append(doc.bullets([f"{k}: {v}" for k, v in priors.describe().items()]))
+    blocks.append(doc.bullets([f"{k}: {v}" if k != "tau" or has_tau else
+                               "tau: not a parameter (every film is opaque)" for k, v in priors.describe().items()]))
     prov_text = json.dumps(_jsonable(prov), indent=2, sort_keys=True, default=str)
     blocks.append(doc.preformatted(prov_text))
     created = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
@@ -705,11 +761,13 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         "diagnostics": {k: diag[k] for k in ("ess", "rhat", "flags", "n_chains", "n_draws", "rhat_max", "ess_min")},
         "fit_quality": fit_rows,
         "model_check": {"level": check["level"], "p_value": check["p_value"], "misfit": misfit},
+        "prior_edge": edges,
         "substrate_factors": factors,
         "colour": colour_summary, "priors": priors.describe(),
-        "ravine_wavelength_nm": float(wl[r_index]), "provenance": prov,
+        "ravine_wavelength_nm": None if r_index is None else float(wl[r_index]), "provenance": prov,
     }
-    csv_text = summary_table.summary_csv(idata, measurements=measurements, check=check, diagnostics=diag)
+    csv_text = summary_table.summary_csv(idata, measurements=measurements, check=check, diagnostics=diag,
+                                         edges=edges)
     return {"blocks": blocks, "figures": pngs, "summary": _jsonable(summary), "csv": csv_text,
             "title": title}
 

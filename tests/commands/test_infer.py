@@ -1,6 +1,7 @@
 """``bayespig infer``: what it writes and prints (through its own argparse registration)."""
 
 import argparse
+import json
 
 import numpy as np
 import pandas as pd
@@ -55,3 +56,53 @@ def test_unsupported_method_is_a_clear_error(tmp_path):
     with pytest.raises(ValueError, match="method4"):
         run(["infer", str(data), "--method", "4", "--out", str(tmp_path / "out"), "--no-progress"])
     assert not (tmp_path / "out").exists()
+
+
+def test_infer_warns_of_a_posterior_at_its_prior_bound(tmp_path, capsys):
+    """An opaque film that absorbs nothing at 400-450 nm: a piles against its prior bound 0 there."""
+    from bayespig.report.write import PRIOR_EDGE_TEXT
+
+    data = tmp_path / "film.csv"
+    wavelengths = [400.0, 450.0, 500.0, 550.0]
+    simulate_to_csv(data, a=[0.0, 0.0, 0.1, 0.2], tau=1.0, design=[{"name": "opaque", "opaque": True}],
+                    wavelengths=wavelengths, eps=0.02, seed=3)
+    out = tmp_path / "out"
+    assert run(["infer", str(data), "--out", str(out), "--seed", "2", "--no-progress"]) == 0
+    message = ("a is at its prior bound 0 at 400-450 nm: the data do not tell it from 0 or push it beyond its "
+               "prior range [0, 1]; unless it can truly be that close to 0, the model may be wrong for these "
+               "data (or the prior too narrow)")
+    assert f"bayespig: warning: {message}\n" in capsys.readouterr().err
+    summary = pd.read_csv(out / "summary.csv", index_col="wavelength_nm", keep_default_na=False)
+    assert list(summary["prior_edge"]) == ["a at 0", "a at 0", "", ""]
+    idata = load_inference(out / "posterior.nc")
+    assert json.loads(idata.posterior.attrs["prior_bounds"]) == {"a": {"lower": 0.0, "upper": 1.0, "scale": "linear"}}
+    # bayespig report prints it too, shows it at the top, and lists it in summary.json
+    from bayespig.commands.report import add_report_parser
+
+    parser = argparse.ArgumentParser(prog="bayespig")
+    add_report_parser(parser.add_subparsers())
+    args = parser.parse_args(["report", str(out / "posterior.nc"), "--out", str(tmp_path / "report"),
+                              "--no-progress"])
+    assert args.func(args) == 0
+    assert f"bayespig: warning: {message}\n" in capsys.readouterr().err
+    markdown = (tmp_path / "report" / "report.md").read_text()
+    from bayespig.report.document import _md_escape
+
+    assert f"**Prior edge.** {_md_escape(PRIOR_EDGE_TEXT)}\n\n- {_md_escape(message)}." in markdown
+    assert markdown.index("Prior edge") < markdown.index("## Optical properties")
+    summary_json = json.loads((tmp_path / "report" / "summary.json").read_text())
+    assert [e["text"] for e in summary_json["prior_edge"]] == [message]
+
+
+def test_infer_warns_when_g_free_is_pinned_at_its_prior_limit(tmp_path, capsys):
+    """An opaque film scattering with g = 0.9, beyond the prior's 0.8: g piles at 0.8, and infer says so."""
+    data = tmp_path / "film.csv"
+    simulate_to_csv(data, a=[0.05, 0.2], tau=1.0, g=0.9, design=[{"name": "opaque", "opaque": True}],
+                    wavelengths=[450.0, 600.0], eps=0.01, seed=1)
+    assert run(["infer", str(data), "--out", str(tmp_path / "out"), "--g", "free", "--no-progress"]) == 0
+    assert ("bayespig: warning: g is at its prior bound 0.8 at 450-600 nm: the data do not tell it from 0.8 or "
+            "push it beyond its prior range [-0.5, 0.8]; unless it can truly be that close to 0.8, the model may "
+            "be wrong for these data (or the prior too narrow)\n"
+            ) in capsys.readouterr().err
+    summary = pd.read_csv(tmp_path / "out" / "summary.csv", keep_default_na=False)
+    assert list(summary["prior_edge"]) == ["g at 0.8", "g at 0.8"]

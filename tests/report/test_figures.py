@@ -41,3 +41,19 @@ def test_report_text_says_the_fixed_g(demo_dir):
     markdown = (demo_dir / "report.md").read_text()
     assert ("- Phase function: g = 0 fixed (isotropic scattering; not inferred - bayespig infer --g free "
             "makes it a parameter)") in markdown
+
+
+def test_corner_plot_of_one_parameter_is_a_histogram_with_the_same_marks():
+    """An opaque film has only a: corner's truth lines fail on one parameter, so it is a histogram."""
+    rng = np.random.default_rng(0)
+    fig = figs.corner_figure(rng.normal(0.21, 0.005, (4000, 1)), ["a"], point=[0.2095], truth=[0.21],
+                             title="550 nm")
+    fig.canvas.draw()
+    (ax,) = fig.axes
+    assert ax.get_xlabel() == "a" and ax.get_title(loc="left").startswith("550 nm: a = 0.21 [")
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert labels == ["5 %, 50 %, 95 % quantiles", "point fit", "truth (synthetic)"]
+    vertical = [line for line in ax.get_lines() if len(line.get_xdata()) == 2 and len(set(line.get_xdata())) == 1]
+    assert len(vertical) == 5  # three quantiles, the point fit and the truth
+    low, high = sorted(ax.get_xlim())
+    assert len([t for t in ax.get_xticks() if low <= t <= high]) <= figs.CORNER_MAX_TICKS + 1
