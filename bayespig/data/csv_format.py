@@ -23,50 +23,26 @@ from __future__ import annotations
 
 import csv
 import difflib
-import io
 import json
 import re
 from itertools import pairwise
-from pathlib import Path
 
 import numpy as np
 
 from ._assemble import SAMPLE_FIELDS, Row, assemble, parse_number
-from .errors import MeasurementError, Problem, atomic_write_text
-from .model import MEASUREMENT_KINDS, PERCENT_THRESHOLD
+from ._source import load
+from .errors import MeasurementError, Problem
+from .model import MEASUREMENT_KINDS, PERCENT_THRESHOLD, value_problem, wavelength_problem
+from .writers import FORMAT_NAME, METADATA_KEY, SETTINGS
 
-__all__ = ["FORMAT_NAME", "format_csv", "read_csv", "write_csv"]
+__all__ = ["FORMAT_NAME", "read_csv"]
 
-#: Value of the ``# format:`` line the writer emits.
-FORMAT_NAME = "bayespig-measurements-1"
 REQUIRED_COLUMNS = ("sample", "role", "measurement", "geometry")
 OPTIONAL_COLUMNS = ("substrate", "film_group", "opaque", "thickness_um", "concentration", "eps")
-#: ``# key:`` settings with a meaning; any other key is metadata.
-SETTINGS = ("format", "units", "n")
 UNITS = ("fraction", "percent")
 
 _DIRECTIVE = re.compile(r"^#\s*([A-Za-z_][\w.\-]*)\s*:\s?(.*)$")
 _WAVELENGTH = re.compile(r"^\s*(\d+(?:\.\d*)?)\s*(?:nm)?\s*$", re.IGNORECASE)
-
-
-def _lines(path):
-    """The file's lines (universal newlines), or a MeasurementError for unreadable files."""
-    name = str(path)
-    try:
-        data = Path(path).read_bytes()
-    except FileNotFoundError:
-        raise MeasurementError(Problem("file not found", file=name)) from None
-    except OSError as error:
-        raise MeasurementError(
-            Problem(f"cannot read the file: {error.strerror or error}", file=name)
-        ) from None
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as error:
-        raise MeasurementError(
-            Problem(f"not UTF-8 text (byte {error.start}); save the file as UTF-8 CSV", file=name)
-        ) from None
-    return text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
 
 
 def _split(line, delimiter):
@@ -89,7 +65,7 @@ def _column_kind(name):
     return "unknown", name.strip()
 
 
-def read_csv(path, *, resample=False):
+def read_csv(path, *, resample=False, progress=None):
     """Read a bayespig CSV file.
 
     Parameters
@@ -99,6 +75,10 @@ def read_csv(path, *, resample=False):
         When rows have blank cells (wavelengths that differ between samples),
         interpolate every row linearly onto the wavelengths they all cover, with
         a warning, instead of raising.
+    progress : None, bool or callable
+        Progress while reading: None shows a bar on stderr for files larger
+        than 20 MB; False nothing; a callable is called as ``progress(lines_read,
+        lines_total)``.
 
     Returns
     -------
@@ -109,8 +89,9 @@ def read_csv(path, *, resample=False):
     MeasurementError
         Listing every problem, each with the file, row (line number) and field.
     """
-    name = str(path)
-    lines = _lines(path)
+    source = load(path)
+    name = source.name
+    lines = source.lines("csv")
     problems, metadata, settings = [], {}, {"units": None, "n": 1.45}
     header_index = None
     for index, line in enumerate(lines):
@@ -222,6 +203,10 @@ def read_csv(path, *, resample=False):
                 field=next(b[2] for a, b in pairwise(wavelength_columns) if b[0] <= a[0]),
             )
         )
+    elif unit := wavelength_problem([w for w, _, _ in wavelength_columns]):
+        problems.append(
+            Problem(unit[1], file=name, row=header_row, field=wavelength_columns[unit[0]][2])
+        )
     if problems:
         raise MeasurementError(problems)
 
@@ -229,8 +214,10 @@ def read_csv(path, *, resample=False):
     wavelength_fields = [cell for _, _, cell in wavelength_columns]
     scale = 0.01 if settings["units"] == "percent" else 1.0
     rows = []
+    update = source.progress(progress, len(lines))
     for index in range(header_index + 1, len(lines)):
         line, row_number = lines[index], index + 1
+        update(index)
         if not line.strip() or line.lstrip().startswith("#"):
             continue
         try:
@@ -261,6 +248,7 @@ def read_csv(path, *, resample=False):
         )
         if row is not None:
             rows.append(row)
+    update.close()
     if not rows and not problems:
         problems.append(
             Problem("the file has a header but no data rows", file=name, row=header_row)
@@ -322,6 +310,29 @@ def _directive(key, value, name, row, settings, metadata, problems):
             problems.append(
                 Problem(f"binder refractive index n: {error}", file=name, row=row, field="n")
             )
+    elif lowered == METADATA_KEY:
+        try:
+            value = json.loads(value)
+        except (ValueError, RecursionError):
+            value = None
+        if not isinstance(value, dict):
+            problems.append(
+                Problem(
+                    f"'# {METADATA_KEY}:' must be followed by a JSON object",
+                    file=name,
+                    row=row,
+                    field=key,
+                )
+            )
+            return
+        for item, item_value in value.items():
+            if item in metadata:
+                problems.append(
+                    Problem(
+                        f"metadata key {item!r} is given twice", file=name, row=row, field=key
+                    )
+                )
+            metadata[item] = item_value
     elif key in metadata:
         problems.append(
             Problem(f"metadata key {key!r} is given twice", file=name, row=row, field=key)
@@ -418,6 +429,14 @@ def _parse_row(
                 Problem(message, file=name, row=row_number, field=wavelength_columns[top][2])
             )
             valid = False
+        elif kind in MEASUREMENT_KINDS and (
+            bad := value_problem(kind, np.nan_to_num(values), percent=units == "percent")
+        ):
+            top, message = bad
+            problems.append(
+                Problem(message, file=name, row=row_number, field=wavelength_columns[top][2])
+            )
+            valid = False
     attributes = {key: get[key] for key in SAMPLE_FIELDS if key in get}
     return Row(
         name,
@@ -430,65 +449,3 @@ def _parse_row(
         wavelength_fields=list(wavelength_fields),
         valid=valid,
     )
-
-
-def _fmt(x):
-    """Shortest text that reads back as the same float (``400`` for 400.0)."""
-    text = repr(float(x))
-    return text.removesuffix(".0")
-
-
-def format_csv(measurements):
-    """The bayespig CSV text of a :class:`~bayespig.data.model.MeasurementSet`."""
-    for key in measurements.metadata:
-        if not re.fullmatch(r"[A-Za-z_][\w.\-]*", key) or key.lower() in SETTINGS:
-            raise ValueError(
-                f"metadata key {key!r} cannot be written: keys are letters, digits, '_', '.', '-' "
-                f"and not one of {', '.join(SETTINGS)}"
-            )
-    out = io.StringIO()
-    out.write(f"# format: {FORMAT_NAME}\n# units: fraction\n# n: {_fmt(measurements.n)}\n")
-    for key, value in measurements.metadata.items():
-        out.write(f"# {key}: {json.dumps(value)}\n")
-    optional = [
-        c
-        for c in ("thickness_um", "concentration", "eps")
-        if any(getattr(s, c) is not None for s in measurements.samples)
-    ]
-    header = [
-        "sample",
-        "role",
-        "substrate",
-        "film_group",
-        "opaque",
-        *optional,
-        "measurement",
-        "geometry",
-    ]
-    writer = csv.writer(out, lineterminator="\n")
-    writer.writerow(header + [_fmt(w) for w in measurements.wavelength_nm])
-    for s in measurements.samples:
-        substrate = (
-            ""
-            if s.substrate is None
-            else (_fmt(s.substrate) if isinstance(s.substrate, float) else s.substrate)
-        )
-        fixed = [s.name, s.role, substrate, s.film_group or "", "yes" if s.opaque else "no"]
-        fixed += ["" if getattr(s, c) is None else _fmt(getattr(s, c)) for c in optional]
-        for m in s.measurements:
-            writer.writerow(fixed + [m.kind, m.label] + [_fmt(v) for v in m.values])
-    return out.getvalue()
-
-
-def write_csv(measurements, path):
-    """Write a measurement set as a bayespig CSV file, atomically (nothing is written on error).
-
-    Values are written with full precision, so reading the file back gives
-    identical arrays and metadata.
-
-    Parameters
-    ----------
-    measurements : MeasurementSet
-    path : str or os.PathLike
-    """
-    atomic_write_text(path, format_csv(measurements))
