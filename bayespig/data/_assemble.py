@@ -238,11 +238,12 @@ def assemble(
     names = set(by_sample)
 
     measurements, where = {}, {}
+    valid_ids = {id(r) for r in valid_rows}
     for name, sample_rows in by_sample.items():
         seen = {}
         measurements[name] = []
         for r in sample_rows:
-            if r not in valid_rows or np.isnan(r.values).any():
+            if id(r) not in valid_ids or np.isnan(r.values).any():
                 continue  # already reported
             try:
                 m = Measurement.from_geometry(r.kind, r.geometry, r.values)

@@ -348,6 +348,23 @@ def _directive(key, value, name, row, settings, metadata, problems):
             )
 
 
+def _fast_values(texts):
+    """The values of a row's cells when all are plain numbers >= 0 (else None: check each).
+
+    Blank cells (wavelengths not measured) are NaN.
+    """
+    try:
+        values = np.array([t if t.strip() else "nan" for t in texts], dtype=float)
+    except ValueError:
+        return None
+    blank = np.isnan(values)
+    if not (np.isfinite(values) | blank).all() or (values < 0).any():
+        return None
+    if blank.any() and any(t.strip().lower() == "nan" for t in texts):
+        return None  # a written NaN is reported, unlike a blank cell
+    return values
+
+
 def _parse_row(
     cells, columns, wavelength_columns, wavelength_fields, units, scale, name, row_number, problems
 ):
@@ -370,46 +387,50 @@ def _parse_row(
             )
         )
         valid = False
-    values = np.full(len(wavelength_columns), np.nan)
-    for k, (_, position, cell) in enumerate(wavelength_columns):
-        text = cells[position].strip()
-        if not text:
-            continue
-        try:
-            value = parse_number(text)
-        except ValueError as error:
-            problems.append(Problem(str(error), file=name, row=row_number, field=cell))
-            valid = False
-            continue
-        if np.isnan(value):
-            problems.append(
-                Problem(
-                    "value is NaN; give a measured value (or leave the cell blank when this "
-                    "wavelength was not measured)",
-                    file=name,
-                    row=row_number,
-                    field=cell,
+    values = _fast_values([cells[position] for _, position, _ in wavelength_columns])
+    if values is not None:
+        values = values * scale
+    else:
+        values = np.full(len(wavelength_columns), np.nan)
+        for k, (_, position, cell) in enumerate(wavelength_columns):
+            text = cells[position].strip()
+            if not text:
+                continue
+            try:
+                value = parse_number(text)
+            except ValueError as error:
+                problems.append(Problem(str(error), file=name, row=row_number, field=cell))
+                valid = False
+                continue
+            if np.isnan(value):
+                problems.append(
+                    Problem(
+                        "value is NaN; give a measured value (or leave the cell blank when this "
+                        "wavelength was not measured)",
+                        file=name,
+                        row=row_number,
+                        field=cell,
+                    )
                 )
-            )
-            valid = False
-        elif not np.isfinite(value):
-            problems.append(
-                Problem(f"value {text!r} is not finite", file=name, row=row_number, field=cell)
-            )
-            valid = False
-        elif value < 0:
-            problems.append(
-                Problem(
-                    f"negative value {text}; reflectances and transmittances are >= 0",
-                    file=name,
-                    row=row_number,
-                    field=cell,
+                valid = False
+            elif not np.isfinite(value):
+                problems.append(
+                    Problem(f"value {text!r} is not finite", file=name, row=row_number, field=cell)
                 )
-            )
-            valid = False
-        values[k] = value * scale
+                valid = False
+            elif value < 0:
+                problems.append(
+                    Problem(
+                        f"negative value {text}; reflectances and transmittances are >= 0",
+                        file=name,
+                        row=row_number,
+                        field=cell,
+                    )
+                )
+                valid = False
+            values[k] = value * scale
     if valid:
-        high = np.nan_to_num(values, nan=-np.inf)
+        high = np.where(np.isnan(values), -np.inf, values)
         top = int(np.argmax(high))
         if high[top] > PERCENT_THRESHOLD and (units != "fraction" or kind != "brdf"):
             if units == "percent":
@@ -430,7 +451,7 @@ def _parse_row(
             )
             valid = False
         elif kind in MEASUREMENT_KINDS and (
-            bad := value_problem(kind, np.nan_to_num(values), percent=units == "percent")
+            bad := value_problem(kind, np.fmax(high, 0.0), percent=units == "percent")
         ):
             top, message = bad
             problems.append(

@@ -20,6 +20,7 @@ reflection), reflectances and transmittances in [0, 1].
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import re
@@ -168,6 +169,13 @@ def parse_measurement_geometry(kind, text):
         When the text does not parse, an angle is out of range, or a BRDF
         geometry is the specular direction.
     """
+    text = "" if text is None else str(text).strip()
+    return dict(_parse_measurement_geometry(kind, text))
+
+
+@functools.lru_cache(maxsize=4096)
+def _parse_measurement_geometry(kind, text):
+    """:func:`parse_measurement_geometry` of stripped text (cached)."""
     text = "" if text is None else str(text).strip()
     if kind == "brdf":
         triple = _TRIPLE.match(text)
