@@ -343,5 +343,53 @@ def assemble(
             )
         problems.append(r.locate(p))
     if problems:
-        raise MeasurementError(problems)
-    return MeasurementSet(wavelength_nm, samples, n=n, metadata=metadata or {}, source=source)
+        # A header keyword (ASTM E1392 ``ROLE``) is checked on each of its rows: once is enough.
+        raise MeasurementError(list(dict.fromkeys(problems)))
+    measurement_set = MeasurementSet(
+        wavelength_nm, samples, n=n, metadata=metadata or {}, source=source
+    )
+    _warn_implausible(measurement_set, where)
+    return measurement_set
+
+
+def _warn_implausible(measurement_set, where):
+    """One warning for values no sample gives but a calibration error can: above 1.
+
+    Hemispherical reflectances and specular transmittances in (1, REFLECTANCE_MAX]
+    (larger ones are refused), and bare substrates (cards) whose albedo under
+    binder (eq. 9 inverted) would exceed 1, are named with their row and field.
+    """
+    found = []
+    by_name = {s.name: s for s in measurement_set.samples}
+    for (name, index), r in where.items():
+        m = by_name[name].measurements[index]
+        if m.kind in ("hemispherical", "specular_transmittance") and m.values.max() > 1.0:
+            top = int(np.argmax(m.values))
+            what = "transmittance" if m.kind == "specular_transmittance" else "reflectance"
+            found.append(
+                f"row {r.row}, field {r.wavelength_fields[top]!r}: {what} "
+                f"{m.values[top]:.4g} ({m.values[top] * 100:.4g} %) is above 1"
+            )
+    cards = {}
+    for film in measurement_set.films:
+        if isinstance(film.substrate, str) and film.substrate in by_name and not film.opaque:
+            cards.setdefault(film.substrate, film)
+    for card, film in cards.items():
+        try:
+            measurement_set.substrate_albedo(film)
+        except MeasurementError as error:
+            r = where.get((card, error.problems[0].measurement or 0))
+            found.append(
+                f"row {r.row if r else '?'}: card {card!r}: albedo under binder above 1 "
+                "(eq. 9 inverted); it cannot serve as a measured substrate"
+            )
+    if found:
+        more = f" (and {len(found) - 3} more)" if len(found) > 3 else ""
+        warnings.warn(
+            f"{measurement_set.source}: {'; '.join(found[:3])}{more}: no sample reflects or "
+            "transmits more than it receives; values slightly above 1 come from the white "
+            "standard's calibration error, which the model does not describe: check the "
+            "calibration",
+            UserWarning,
+            stacklevel=4,
+        )

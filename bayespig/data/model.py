@@ -268,7 +268,7 @@ def wavelength_problem(wavelength_nm):
     if wavelength.size == 0 or outside.size == 0:
         return None
     first, last = wavelength.min(), wavelength.max()
-    span = f"{first:g}–{last:g}" if first != last else f"{first:g}"
+    span = f"{first:.10g}–{last:.10g}" if first != last else f"{first:.10g}"
     if low / 1000 <= first and last <= high / 1000:
         unit, fix = "micrometres", "multiply them by 1000"
     elif low * 10 <= first and last <= high * 10:
@@ -276,7 +276,7 @@ def wavelength_problem(wavelength_nm):
     else:
         value = wavelength[outside[0]]
         return int(outside[0]), (
-            f"wavelength {value:g} nm is outside {low:g}–{high:g} nm, the range of UV–visible–NIR "
+            f"wavelength {value:.10g} nm is outside {low:g}–{high:g} nm, the range of UV–visible–NIR "
             "spectrophotometers; give wavelengths in nanometres"
         )
     return int(outside[0]), (
@@ -850,9 +850,14 @@ class MeasurementSet:
 
     def sample(self, name):
         """The sample called ``name``."""
-        for sample in self.samples:
-            if sample.name == name:
-                return sample
+        index = self.__dict__.get("_by_name")
+        if index is None:
+            index = {}
+            for sample in reversed(self.samples):
+                index[getattr(sample, "name", None)] = sample
+            object.__setattr__(self, "_by_name", index)
+        if name in index:
+            return index[name]
         raise KeyError(f"no sample {name!r}; samples: {', '.join(self.sample_names)}")
 
     @property
