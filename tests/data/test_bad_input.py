@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from bayespig.data import (
     Measurement,
@@ -253,3 +255,174 @@ def test_pipe_read_through_read_measurements(tmp_path):
     finally:
         os.close(read)
     assert ms == read_csv(EXAMPLES / "method4-black-white.csv")
+
+
+# ------------------------------------------------------------------ to_csv round trips
+def brdf(values=(0.02, 0.03)):
+    return Measurement.from_geometry("brdf", "45as15", list(values))
+
+
+def test_sample_named_like_a_comment_round_trips(tmp_path):
+    m = brdf()
+    ms = MeasurementSet(
+        [400.0, 500.0],
+        [Sample("#1", "film", (m,), opaque=True), Sample("b", "film", (m,), opaque=True)],
+    )
+    ms.to_csv(tmp_path / "rt.csv")
+    back = read_measurements(tmp_path / "rt.csv")
+    assert back.sample_names == ("#1", "b")
+    assert back == ms
+
+
+@pytest.mark.parametrize(
+    ("name", "shown", "control"), [("a\rb", r"'a\rb'", r"'\r'"), ("a\x00b", r"'a\x00b'", r"'\x00'")]
+)
+def test_sample_names_a_file_cannot_hold_are_refused_at_construction(name, shown, control):
+    with pytest.raises(MeasurementError) as error:
+        Sample(name, "film", (brdf(),), opaque=True)
+    assert only_problem(error) == (
+        f"sample {shown}, field 'sample': sample name {shown} contains the control character "
+        f"{control}, which no measurement file can hold; rename the sample"
+    )
+
+
+def test_astm_metadata_keys_round_trip_through_csv(tmp_path):
+    astm = write(
+        tmp_path / "m.astm",
+        "NAME f\nOPAQUE yes\n"
+        'BAYESPIG_METADATA {"a key": 1, "units": "x", "": [1, 2], "é": {"n": null}, '
+        '"metadata": "m", "Format": 2, "ok": "plain"}\n'
+        "VARS theta_i,phi_i,theta_s,phi_s,400nm,500nm\n"
+        f"{math.radians(45)},0,{math.radians(30)},{math.pi},0.02,0.03\n",
+    )
+    ms = read_astm_e1392(astm)
+    ms.to_csv(tmp_path / "m.csv")
+    text = (tmp_path / "m.csv").read_text()
+    assert "# ok: \"plain\"\n" in text
+    assert read_csv(tmp_path / "m.csv") == ms
+
+
+NAMES = st.text(
+    st.characters(blacklist_categories=("Cc", "Cs")), min_size=1, max_size=12
+).filter(lambda t: t == t.strip() and t.strip())
+JSON = st.recursive(
+    st.none() | st.booleans() | st.integers(-(10**6), 10**6) | st.floats(allow_nan=False)
+    | st.text(max_size=8),
+    lambda children: st.lists(children, max_size=3)
+    | st.dictionaries(st.text(max_size=6), children, max_size=3),
+    max_leaves=8,
+)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    names=st.lists(NAMES, min_size=1, max_size=4, unique=True),
+    group=st.none() | NAMES,
+    metadata=st.dictionaries(st.text(max_size=10), JSON, max_size=4),
+)
+def test_csv_and_astm_round_trip_any_names_and_metadata(tmp_path, names, group, metadata):
+    """Every name a Sample accepts and every JSON metadata survive to_csv / to_astm_e1392."""
+    samples = [
+        Sample(name, "film", (brdf((0.01 * (k + 1), 0.02)),), opaque=True, film_group=group)
+        for k, name in enumerate(names)
+    ]
+    ms = MeasurementSet([400.0, 500.0], samples, metadata=metadata)
+    ms.to_csv(tmp_path / "rt.csv")
+    assert read_csv(tmp_path / "rt.csv") == ms
+    one = MeasurementSet([400.0, 500.0], samples[:1], metadata=metadata)
+    one.to_astm_e1392(tmp_path / "rt.astm")
+    back = read_astm_e1392(tmp_path / "rt.astm")
+    assert back == one
+
+
+# ------------------------------------------------------------------ messages
+@pytest.mark.parametrize(
+    ("suffix", "reader", "advice"),
+    [
+        (
+            ".csv",
+            read_csv,
+            "save it as UTF-8 (in a spreadsheet: 'CSV UTF-8'), or convert it, e.g. "
+            "'iconv -f WINDOWS-1252 -t UTF-8 FILE > NEW.csv'",
+        ),
+        (
+            ".astm",
+            read_astm_e1392,
+            "ASTM E1392 files are read as UTF-8 text; convert it, e.g. "
+            "'iconv -f WINDOWS-1252 -t UTF-8 FILE > NEW.astm'",
+        ),
+        (
+            ".txt",
+            read_spectral_table,
+            "export the table as UTF-8 text, or convert it, e.g. "
+            "'iconv -f WINDOWS-1252 -t UTF-8 FILE > NEW.txt'",
+        ),
+    ],
+)
+def test_latin1_file_names_row_byte_and_the_advice_of_its_format(tmp_path, suffix, reader, advice):
+    path = tmp_path / f"latin1{suffix}"
+    path.write_bytes(b"first line\nsecond line\nthird: 5 \xb5m\n")
+    with pytest.raises(MeasurementError) as error:
+        reader(path)
+    assert only_problem(error) == (
+        f"{path}, row 3: byte 10 of the line (0xB5, 'µ' in Windows-1252) is not UTF-8 text; "
+        f"{advice}"
+    )
+
+
+def test_wide_table_with_trailing_tabs_is_read(tmp_path):
+    plain = read_revigo(table(tmp_path / "plain.txt", ["Name", "400", "500"], FOUR))
+    trailing = table(tmp_path / "tabs.txt", ["Name", "400", "500"], FOUR, end="\t")
+    assert read_revigo(trailing) == {
+        k: MeasurementSet(v.wavelength_nm, v.samples, n=v.n, metadata={
+            **v.metadata, "source": str(trailing)}) for k, v in plain.items()
+    }
+    assert check_report(trailing).startswith(f"{trailing}: spectral table file, valid\n")
+
+
+def test_wide_table_with_a_sample_column_is_sniffed_as_a_table(tmp_path):
+    path = table(tmp_path / "s.txt", ["Sample", "400", "500"], FOUR)
+    assert check_report(path).startswith(f"{path}: spectral table file, valid\n")
+    other = table(tmp_path / "o.txt", ["Spectrum", "400", "500"], FOUR)
+    with pytest.raises(MeasurementError) as error:
+        read_measurements(other)
+    assert only_problem(error) == (
+        f"{other}, row 1, field 'Spectrum': the first column must be 'Name' (or 'Sample'), "
+        "got 'Spectrum'"
+    )
+
+
+def test_unknown_astm_role_is_reported_once(tmp_path):
+    rows = "".join(
+        f"{math.radians(45)},0,{math.radians(t)},{math.pi},0.02,0.03\n" for t in range(10, 40, 5)
+    )
+    path = write(
+        tmp_path / "r.astm",
+        f"NAME f\nROLE paint\nOPAQUE yes\nVARS theta_i,phi_i,theta_s,phi_s,400nm,500nm\n{rows}",
+    )
+    with pytest.raises(MeasurementError) as error:
+        read_astm_e1392(path)
+    assert only_problem(error) == (
+        f"{path}, row 2, field 'ROLE': role must be one of film, substrate, "
+        "clear_coated_substrate, film_on_glass, got 'paint'"
+    )
+
+
+def test_symbolic_link_loop_and_dangling_link_are_named(tmp_path):
+    os.symlink(tmp_path / "b", tmp_path / "a")
+    os.symlink(tmp_path / "a", tmp_path / "b")
+    os.symlink(tmp_path / "gone.csv", tmp_path / "dangling.csv")
+    with pytest.raises(MeasurementError) as error:
+        read_measurements(tmp_path / "a")
+    assert only_problem(error) == (
+        f"{tmp_path / 'a'}: symbolic link loop: the link points (through other links) back to "
+        "itself"
+    )
+    with pytest.raises(MeasurementError) as error:
+        check_report(tmp_path / "dangling.csv")
+    assert only_problem(error) == (
+        f"{tmp_path / 'dangling.csv'}: symbolic link to a missing file ({tmp_path / 'gone.csv'})"
+    )
+    with pytest.raises(MeasurementError) as error:
+        read_measurements(tmp_path / "missing.csv")
+    assert only_problem(error) == f"{tmp_path / 'missing.csv'}: file not found"
