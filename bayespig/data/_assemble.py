@@ -30,6 +30,11 @@ SAMPLE_FIELDS = (
     "eps",
 )
 
+#: Cards below these values cannot have an albedo under binder above 1, so their albedo is not
+#: computed for the warning about it: hemispherical/45-0 reflectance [-] and BRDF [1/sr]
+#: (eq. 9 inverted exceeds 1 only above about 1 - r_F = 0.96 and 0.35 1/sr at n = 1.45).
+CARD_CHECK_REFLECTANCE = 0.8
+CARD_CHECK_BRDF = 0.8 / math.pi
 _TRUE = ("yes", "y", "true", "1")
 _FALSE = ("no", "n", "false", "0")
 
@@ -374,6 +379,16 @@ def _warn_implausible(measurement_set, where):
     for film in measurement_set.films:
         if isinstance(film.substrate, str) and film.substrate in by_name and not film.opaque:
             cards.setdefault(film.substrate, film)
+    # Only bright cards can have an albedo above 1 (eq. 9 inverted needs a reflectance above
+    # about 1 - r_F, a BRDF above about 0.3 1/sr); skip the integrals for the others.
+    cards = {
+        card: film
+        for card, film in cards.items()
+        if any(
+            m.values.max() > (CARD_CHECK_BRDF if m.kind == "brdf" else CARD_CHECK_REFLECTANCE)
+            for m in by_name[card].measurements
+        )
+    }
     for card, film in cards.items():
         try:
             measurement_set.substrate_albedo(film)

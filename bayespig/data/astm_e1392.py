@@ -76,6 +76,17 @@ def _split(line):
     return [cell.strip() for cell in (line.split(",") if "," in line else line.split())]
 
 
+def _fast_numbers(cells):
+    """The numbers of a data row when all are finite and the BRDFs >= 0 (else None: check each)."""
+    try:
+        numbers = np.array(cells, dtype=float)
+    except ValueError:
+        return None
+    if not np.isfinite(numbers).all() or (numbers[4:] < 0).any():
+        return None
+    return numbers.tolist()
+
+
 def _read_one(path, defaults, problems, progress):
     """Rows, wavelengths, binder index and metadata of one file."""
     source = load(path)
@@ -216,6 +227,7 @@ def _read_one(path, defaults, problems, progress):
 
     rows = []
     n_columns = 4 + len(wavelength_nm)
+    wavelength_fields = [f"{_fmt(w)}nm" for w in wavelength_nm]
     update = source.progress(progress, len(lines))
     for index in range(vars_index + 1, len(lines)):
         line, row_number = lines[index].strip(), index + 1
@@ -230,27 +242,29 @@ def _read_one(path, defaults, problems, progress):
                 )
             )
             continue
-        numbers, valid = [], True
-        for column, cell in zip(names, cells):
-            try:
-                value = parse_number(cell)
-            except ValueError as error:
-                problems.append(Problem(str(error), file=name, row=row_number, field=column))
-                valid = False
-                continue
-            if not math.isfinite(value):
-                problems.append(
-                    Problem(
-                        f"value {cell!r} is not finite", file=name, row=row_number, field=column
+        numbers, valid = _fast_numbers(cells), True
+        if numbers is None:
+            numbers = []
+            for column, cell in zip(names, cells):
+                try:
+                    value = parse_number(cell)
+                except ValueError as error:
+                    problems.append(Problem(str(error), file=name, row=row_number, field=column))
+                    valid = False
+                    continue
+                if not math.isfinite(value):
+                    problems.append(
+                        Problem(
+                            f"value {cell!r} is not finite", file=name, row=row_number, field=column
+                        )
                     )
-                )
-                valid = False
-            elif len(numbers) >= 4 and value < 0:
-                problems.append(
-                    Problem(f"negative BRDF {cell}", file=name, row=row_number, field=column)
-                )
-                valid = False
-            numbers.append(value)
+                    valid = False
+                elif len(numbers) >= 4 and value < 0:
+                    problems.append(
+                        Problem(f"negative BRDF {cell}", file=name, row=row_number, field=column)
+                    )
+                    valid = False
+                numbers.append(value)
         if valid and (bad := value_problem("brdf", numbers[4:])):
             problems.append(
                 Problem(bad[1], file=name, row=row_number, field=names[4 + bad[0]])
@@ -301,7 +315,7 @@ def _read_one(path, defaults, problems, progress):
                 np.array(numbers[4:]),
                 dict(attributes),
                 dict(fields),
-                [f"{_fmt(w)}nm" for w in wavelength_nm],
+                wavelength_fields,
                 True,
                 dict(field_rows),
             )

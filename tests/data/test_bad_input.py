@@ -426,3 +426,18 @@ def test_symbolic_link_loop_and_dangling_link_are_named(tmp_path):
     with pytest.raises(MeasurementError) as error:
         read_measurements(tmp_path / "missing.csv")
     assert only_problem(error) == f"{tmp_path / 'missing.csv'}: file not found"
+
+
+# ------------------------------------------------------------------ progress on big files
+def test_progress_callback_and_bar_on_big_files(tmp_path, capsys, monkeypatch):
+    path = EXAMPLES / "method4-black-white.csv"
+    calls = []
+    read_csv(path, progress=lambda done, total: calls.append((done, total)))
+    total = len(path.read_text().split("\n"))
+    assert calls and calls[-1] == (total, total)
+    assert all(a[0] <= b[0] for a, b in zip(calls, calls[1:]))
+    read_csv(path)
+    assert capsys.readouterr().err == ""  # small file: no bar
+    monkeypatch.setattr("bayespig.data._source.LARGE_FILE_BYTES", 100)
+    read_csv(path)
+    assert f"reading {path}" in capsys.readouterr().err
