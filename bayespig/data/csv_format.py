@@ -10,8 +10,11 @@
 
 Lines starting with ``#`` before the column header are ``# key: value``
 settings (``units``: ``fraction`` or ``percent``; ``n``: binder refractive
-index; ``format``; anything else is kept as metadata, read as JSON when it
-parses as JSON and as text otherwise); other ``#`` lines are comments.
+index; ``format``; ``metadata``: a JSON object of metadata, used by the writer for
+keys that cannot be ``# key:`` lines of their own; anything else is kept as
+metadata, read as JSON when it parses as JSON and as text otherwise); other
+``#`` lines are comments. A sample name starting with ``#`` is quoted
+(``"#1"``) so that its row is not a comment.
 Required columns: ``sample``, ``role``, ``measurement``, ``geometry`` and at
 least one wavelength column (a number in nm, e.g. ``400`` or ``400nm``);
 optional: ``substrate``, ``film_group``, ``opaque``, ``thickness_um``,

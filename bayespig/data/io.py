@@ -63,7 +63,8 @@ def read_measurements(path, *, film=None, resample=False):
     ----------
     path : str, os.PathLike or sequence of them
         A bayespig CSV file; an ASTM E1392 file (or a list of them, one per
-        sample); a wide spectral table or its folder (Revigo convention).
+        sample); a wide spectral table or its folder (Revigo convention). The
+        file is read once, so a pipe (``<(cat file)``, ``/dev/stdin``) works.
     film : str, optional
         For spectral tables holding several films: the film id to return.
     resample : bool

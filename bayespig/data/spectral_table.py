@@ -363,6 +363,7 @@ def read_revigo(
         raise MeasurementError(problems)
     geometry = f"{theta_i:g}d-{'sci' if specular == 'included' else 'sce'}"
     sets = {}
+    wavelength_fields = [f"{w:g}" for w in wavelength_nm]
     for film_id, parts in by_id.items():
         rows = []
         for suffix, (role, substrate) in REVIGO_SUFFIXES.items():
@@ -380,7 +381,7 @@ def read_revigo(
                     values,
                     attributes,
                     {"role": "Name", "substrate": "Name", "film_group": "Name"},
-                    [f"{w:g}" for w in wavelength_nm],
+                    wavelength_fields,
                 )
             )
         metadata = {
