@@ -146,8 +146,12 @@ class Source:
             report = None
         elif progress is True:
             bar = tqdm(
-                total=total, unit=" lines", desc=f"reading {self.name}", file=sys.stderr,
-                unit_scale=True, leave=False,
+                total=total,
+                unit=" lines",
+                desc=f"reading {self.name}",
+                file=sys.stderr,
+                unit_scale=True,
+                leave=False,
             )
 
             def report(done, total):

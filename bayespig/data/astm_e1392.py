@@ -266,9 +266,7 @@ def _read_one(path, defaults, problems, progress):
                     valid = False
                 numbers.append(value)
         if valid and (bad := value_problem("brdf", numbers[4:])):
-            problems.append(
-                Problem(bad[1], file=name, row=row_number, field=names[4 + bad[0]])
-            )
+            problems.append(Problem(bad[1], file=name, row=row_number, field=names[4 + bad[0]]))
             valid = False
         if not valid:
             continue

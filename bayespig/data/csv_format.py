@@ -36,7 +36,7 @@ from ._assemble import SAMPLE_FIELDS, Row, assemble, parse_number
 from ._source import load
 from .errors import MeasurementError, Problem
 from .model import MEASUREMENT_KINDS, PERCENT_THRESHOLD, value_problem, wavelength_problem
-from .writers import FORMAT_NAME, METADATA_KEY, SETTINGS
+from .writers import FORMAT_NAME, METADATA_KEY
 
 __all__ = ["FORMAT_NAME", "read_csv"]
 
@@ -331,9 +331,7 @@ def _directive(key, value, name, row, settings, metadata, problems):
         for item, item_value in value.items():
             if item in metadata:
                 problems.append(
-                    Problem(
-                        f"metadata key {item!r} is given twice", file=name, row=row, field=key
-                    )
+                    Problem(f"metadata key {item!r} is given twice", file=name, row=row, field=key)
                 )
             metadata[item] = item_value
     elif key in metadata:

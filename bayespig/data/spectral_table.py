@@ -282,9 +282,7 @@ def _find(folder, pattern, what):
     return found[0]
 
 
-def read_revigo(
-    path, *, specular="excluded", theta_i=8.0, units="percent", n=1.45, progress=None
-):
+def read_revigo(path, *, specular="excluded", theta_i=8.0, units="percent", n=1.45, progress=None):
     """Read a Revigo-style table into one measurement set per film id.
 
     Parameters

@@ -4,10 +4,9 @@ import math
 import os
 import subprocess
 import sys
-import warnings
+from itertools import pairwise
 from pathlib import Path
 
-import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -180,18 +179,24 @@ def test_card_with_albedo_above_one_warns(tmp_path):
     [
         (
             ["0.4", "0.7"],
-            "wavelengths 0.4–0.7 look like micrometres; bayespig wants nanometres "
-            "(multiply them by 1000)",
+            (
+                "wavelengths 0.4–0.7 look like micrometres; bayespig wants nanometres "
+                "(multiply them by 1000)"
+            ),
         ),
         (
             ["4000", "7000"],
-            "wavelengths 4000–7000 look like ångströms; bayespig wants nanometres "
-            "(divide them by 10)",
+            (
+                "wavelengths 4000–7000 look like ångströms; bayespig wants nanometres "
+                "(divide them by 10)"
+            ),
         ),
         (
             ["400", "10000399"],
-            "wavelength 10000399 nm is outside 170–3300 nm, the range of UV–visible–NIR "
-            "spectrophotometers; give wavelengths in nanometres",
+            (
+                "wavelength 10000399 nm is outside 170–3300 nm, the range of UV–visible–NIR "
+                "spectrophotometers; give wavelengths in nanometres"
+            ),
         ),
     ],
 )
@@ -298,23 +303,29 @@ def test_astm_metadata_keys_round_trip_through_csv(tmp_path):
     ms = read_astm_e1392(astm)
     ms.to_csv(tmp_path / "m.csv")
     text = (tmp_path / "m.csv").read_text()
-    assert "# ok: \"plain\"\n" in text
+    assert '# ok: "plain"\n' in text
     assert read_csv(tmp_path / "m.csv") == ms
 
 
-NAMES = st.text(
-    st.characters(blacklist_categories=("Cc", "Cs")), min_size=1, max_size=12
-).filter(lambda t: t == t.strip() and t.strip())
+NAMES = st.text(st.characters(blacklist_categories=("Cc", "Cs")), min_size=1, max_size=12).filter(
+    lambda t: t == t.strip() and t.strip()
+)
 JSON = st.recursive(
-    st.none() | st.booleans() | st.integers(-(10**6), 10**6) | st.floats(allow_nan=False)
+    st.none()
+    | st.booleans()
+    | st.integers(-(10**6), 10**6)
+    | st.floats(allow_nan=False)
     | st.text(max_size=8),
-    lambda children: st.lists(children, max_size=3)
-    | st.dictionaries(st.text(max_size=6), children, max_size=3),
+    lambda children: (
+        st.lists(children, max_size=3) | st.dictionaries(st.text(max_size=6), children, max_size=3)
+    ),
     max_leaves=8,
 )
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 @given(
     names=st.lists(NAMES, min_size=1, max_size=4, unique=True),
     group=st.none() | NAMES,
@@ -342,20 +353,26 @@ def test_csv_and_astm_round_trip_any_names_and_metadata(tmp_path, names, group, 
         (
             ".csv",
             read_csv,
-            "save it as UTF-8 (in a spreadsheet: 'CSV UTF-8'), or convert it, e.g. "
-            "'iconv -f WINDOWS-1252 -t UTF-8 FILE > NEW.csv'",
+            (
+                "save it as UTF-8 (in a spreadsheet: 'CSV UTF-8'), or convert it, e.g. "
+                "'iconv -f WINDOWS-1252 -t UTF-8 FILE > NEW.csv'"
+            ),
         ),
         (
             ".astm",
             read_astm_e1392,
-            "ASTM E1392 files are read as UTF-8 text; convert it, e.g. "
-            "'iconv -f WINDOWS-1252 -t UTF-8 FILE > NEW.astm'",
+            (
+                "ASTM E1392 files are read as UTF-8 text; convert it, e.g. "
+                "'iconv -f WINDOWS-1252 -t UTF-8 FILE > NEW.astm'"
+            ),
         ),
         (
             ".txt",
             read_spectral_table,
-            "export the table as UTF-8 text, or convert it, e.g. "
-            "'iconv -f WINDOWS-1252 -t UTF-8 FILE > NEW.txt'",
+            (
+                "export the table as UTF-8 text, or convert it, e.g. "
+                "'iconv -f WINDOWS-1252 -t UTF-8 FILE > NEW.txt'"
+            ),
         ),
     ],
 )
@@ -374,8 +391,10 @@ def test_wide_table_with_trailing_tabs_is_read(tmp_path):
     plain = read_revigo(table(tmp_path / "plain.txt", ["Name", "400", "500"], FOUR))
     trailing = table(tmp_path / "tabs.txt", ["Name", "400", "500"], FOUR, end="\t")
     assert read_revigo(trailing) == {
-        k: MeasurementSet(v.wavelength_nm, v.samples, n=v.n, metadata={
-            **v.metadata, "source": str(trailing)}) for k, v in plain.items()
+        k: MeasurementSet(
+            v.wavelength_nm, v.samples, n=v.n, metadata={**v.metadata, "source": str(trailing)}
+        )
+        for k, v in plain.items()
     }
     assert check_report(trailing).startswith(f"{trailing}: spectral table file, valid\n")
 
@@ -435,7 +454,7 @@ def test_progress_callback_and_bar_on_big_files(tmp_path, capsys, monkeypatch):
     read_csv(path, progress=lambda done, total: calls.append((done, total)))
     total = len(path.read_text().split("\n"))
     assert calls and calls[-1] == (total, total)
-    assert all(a[0] <= b[0] for a, b in zip(calls, calls[1:]))
+    assert all(a[0] <= b[0] for a, b in pairwise(calls))
     read_csv(path)
     assert capsys.readouterr().err == ""  # small file: no bar
     monkeypatch.setattr("bayespig.data._source.LARGE_FILE_BYTES", 100)

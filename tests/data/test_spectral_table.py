@@ -1,7 +1,7 @@
 """Wide spectral tables; the 84 Revigo films over black and white with their cards."""
 
-import os
 import csv
+import os
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +16,9 @@ from bayespig.data import (
 )
 
 REVIGO = Path(
-    os.environ.get("BAYESPIG_REVIGO", Path(__file__).resolve().parents[3] / "shared" / "data" / "revigo")
+    os.environ.get(
+        "BAYESPIG_REVIGO", Path(__file__).resolve().parents[3] / "shared" / "data" / "revigo"
+    )
 )
 REVIGO_TABLE = REVIGO / "revigo-aggregated-palette-spectral-data.txt"
 needs_revigo = pytest.mark.skipif(
