@@ -39,7 +39,7 @@ _TRUE = ("yes", "y", "true", "1")
 _FALSE = ("no", "n", "false", "0")
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, slots=True)
 class Row:
     """One spectrum as read from a file.
 

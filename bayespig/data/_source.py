@@ -114,11 +114,18 @@ class Source:
                         row=row,
                     )
                 ) from None
-            self._data = None  # keep one copy of the content, not two
+            self._data = data = None  # keep one copy of the content, not two
             if "\r" in text:
                 text = text.replace("\r\n", "\n").replace("\r", "\n")
             self._lines = text.split("\n")
         return self._lines
+
+    def take_lines(self, file_format):
+        """:meth:`lines`, handed over: the Source keeps no reference, so a reader can free
+        each line once parsed (``lines[i] = None``) and hold a big file once, not twice."""
+        lines = self.lines(file_format)
+        self._lines = []
+        return lines
 
     def progress(self, progress, total):
         """A function ``update(done)`` reporting how many of ``total`` lines are read.

@@ -91,7 +91,7 @@ def _read_one(path, defaults, problems, progress):
     """Rows, wavelengths, binder index and metadata of one file."""
     source = load(path)
     name = source.name
-    lines = source.lines("astm_e1392")
+    lines = source.take_lines("astm_e1392")
     header, header_rows, vars_index = {}, {}, None
     for index, line in enumerate(lines):
         stripped = line.strip()
@@ -231,6 +231,7 @@ def _read_one(path, defaults, problems, progress):
     update = source.progress(progress, len(lines))
     for index in range(vars_index + 1, len(lines)):
         line, row_number = lines[index].strip(), index + 1
+        lines[index] = None  # parsed: free it
         update(index)
         if not line or line.startswith("#"):
             continue

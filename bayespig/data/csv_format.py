@@ -94,7 +94,7 @@ def read_csv(path, *, resample=False, progress=None):
     """
     source = load(path)
     name = source.name
-    lines = source.lines("csv")
+    lines = source.take_lines("csv")
     problems, metadata, settings = [], {}, {"units": None, "n": 1.45}
     header_index = None
     for index, line in enumerate(lines):
@@ -220,6 +220,7 @@ def read_csv(path, *, resample=False, progress=None):
     update = source.progress(progress, len(lines))
     for index in range(header_index + 1, len(lines)):
         line, row_number = lines[index], index + 1
+        lines[index] = None  # parsed: free it
         update(index)
         if not line.strip() or line.lstrip().startswith("#"):
             continue
@@ -468,6 +469,6 @@ def _parse_row(
         get["geometry"],
         values,
         attributes,
-        wavelength_fields=list(wavelength_fields),
+        wavelength_fields=wavelength_fields,  # shared by all rows, never changed in place
         valid=valid,
     )

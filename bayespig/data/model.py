@@ -92,6 +92,8 @@ BRDF_MAX = 1e4
 WAVELENGTH_RANGE_NM = (170.0, 3300.0)
 #: Angles are rounded to this many decimals of a degree when parsed.
 ANGLE_DECIMALS = 6
+#: Sample names shown by ``repr`` of a measurement set.
+REPR_SAMPLES = 8
 
 _NAMED_SUBSTRATES = {"black": BLACK_SUBSTRATE_ALBEDO, "white": WHITE_SUBSTRATE_ALBEDO}
 _HEMISPHERICAL = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*d\s*[-_ ]?\s*(sci|sce)\s*$", re.IGNORECASE)
@@ -1050,8 +1052,10 @@ class MeasurementSet:
     __hash__ = None
 
     def __repr__(self):
+        names = list(self.sample_names[:REPR_SAMPLES])
+        shown = f"{names}"[:-1] + (", ...]" if len(self.samples) > REPR_SAMPLES else "]")
         return (
-            f"MeasurementSet({len(self.samples)} samples {list(self.sample_names)}, "
+            f"MeasurementSet({len(self.samples)} samples {shown}, "
             f"{self.n_wavelengths} wavelengths "
             f"{self.wavelength_nm[0]:g}–{self.wavelength_nm[-1]:g} nm)"
         )

@@ -143,7 +143,7 @@ def read_spectral_table(path, *, units="percent", progress=None):
         raise ValueError(f"units must be 'percent' or 'fraction', got {units!r}")
     source = load(path)
     name = source.name
-    lines = source.lines("spectral_table")
+    lines = source.take_lines("spectral_table")
     problems = []
     header_index = next((i for i, line in enumerate(lines) if line.strip()), None)
     if header_index is None:
@@ -190,6 +190,7 @@ def read_spectral_table(path, *, units="percent", progress=None):
     update = source.progress(progress, len(lines))
     for index in range(header_index + 1, len(lines)):
         line, row = lines[index], index + 1
+        lines[index] = None  # parsed: free it
         update(index)
         if not line.strip():
             continue

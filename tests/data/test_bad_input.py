@@ -460,3 +460,11 @@ def test_progress_callback_and_bar_on_big_files(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr("bayespig.data._source.LARGE_FILE_BYTES", 100)
     read_csv(path)
     assert f"reading {path}" in capsys.readouterr().err
+
+
+def test_repr_of_a_big_set_lists_a_few_names():
+    samples = [Sample(f"s{k}", "film", (brdf(),), opaque=True) for k in range(10)]
+    assert repr(MeasurementSet([400.0, 500.0], samples)) == (
+        "MeasurementSet(10 samples ['s0', 's1', 's2', 's3', 's4', 's5', 's6', 's7', ...], "
+        "2 wavelengths 400–500 nm)"
+    )
