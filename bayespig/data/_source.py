@@ -5,7 +5,8 @@ from disk (or from a pipe such as ``<(cat file)`` or ``/dev/stdin``) exactly
 once: sniffing the format looks at the bytes already in memory instead of
 reopening, and consuming, the stream.
 
-Text must be UTF-8 (a byte-order mark is allowed). A file in another encoding
+Text must be UTF-8 (a byte-order mark is allowed) or UTF-16 with its byte-order
+mark (the "Unicode text" export of spreadsheets). A file in another encoding
 (Latin-1, Windows-1252, ...) is refused with the line and byte of the first
 character that is not UTF-8 and the way to convert it for its format: the
 single-byte encodings cannot be told apart from the bytes (0xB5 is "µ" in
@@ -34,6 +35,7 @@ SNIFF_BYTES = 64 * 2**10
 #: Progress is reported about this many times over a file.
 PROGRESS_STEPS = 100
 
+_UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")
 #: Advice for a file that is not UTF-8, per format.
 _ENCODING_ADVICE = {
     "csv": "save it as UTF-8 (in a spreadsheet: 'CSV UTF-8'), or convert it, e.g. "
@@ -58,6 +60,22 @@ def _open_problem(path, error):
     if isinstance(error, PermissionError):
         return "permission denied: cannot read the file"
     return f"cannot read the file: {error.strerror or error}"
+
+
+def _utf16(data, errors="strict"):
+    """The text of UTF-16 data with a byte-order mark ("Unicode text" of spreadsheets), or None.
+
+    Measurement files are mostly digits and separators: data that decodes to less than 90 %
+    ASCII is binary that happens to start like a byte-order mark, not UTF-16 text.
+    """
+    if data[:2] not in _UTF16_BOMS:
+        return None
+    try:
+        text = data.decode("utf-16", errors=errors)
+    except UnicodeDecodeError:
+        return None
+    ascii_share = sum(c.isascii() for c in text[:SNIFF_BYTES]) / max(1, len(text[:SNIFF_BYTES]))
+    return text if ascii_share >= 0.9 else None
 
 
 class Source:
@@ -87,7 +105,10 @@ class Source:
         """The first :data:`SNIFF_BYTES` as text (undecodable bytes replaced), for sniffing."""
         if self._data is None:
             return "\n".join(self._lines[:200])
-        return self._data[:SNIFF_BYTES].decode("utf-8", errors="replace").removeprefix("\ufeff")
+        text = _utf16(self._data[:SNIFF_BYTES], errors="replace")  # may end mid-character
+        if text is None:
+            text = self._data[:SNIFF_BYTES].decode("utf-8", errors="replace")
+        return text.removeprefix("\ufeff")
 
     def lines(self, file_format):
         """The lines (universal newlines), or a MeasurementError naming the first non-UTF-8 byte.
@@ -99,8 +120,10 @@ class Source:
         """
         if self._lines is None:
             data = self._data
+            text = _utf16(data)
             try:
-                text = data.decode("utf-8-sig")
+                if text is None:
+                    text = data.decode("utf-8-sig")
             except UnicodeDecodeError as error:
                 line_start = data.rfind(b"\n", 0, error.start) + 1
                 row = data.count(b"\n", 0, error.start) + 1

@@ -468,3 +468,11 @@ def test_repr_of_a_big_set_lists_a_few_names():
         "MeasurementSet(10 samples ['s0', 's1', 's2', 's3', 's4', 's5', 's6', 's7', ...], "
         "2 wavelengths 400–500 nm)"
     )
+
+
+def test_utf16_with_byte_order_mark_is_read(tmp_path):
+    """The "Unicode text" export of spreadsheets: UTF-16 with a byte-order mark."""
+    source = EXAMPLES / "method4-black-white.csv"
+    path = tmp_path / "utf16.csv"
+    path.write_bytes(source.read_text(encoding="utf-8").encode("utf-16"))
+    assert read_measurements(path) == read_csv(source)
