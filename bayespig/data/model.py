@@ -78,7 +78,9 @@ PERCENT_THRESHOLD = 1.5
 #: non-fluorescent sample cannot send back more light than it receives (1); 0.05 above that
 #: allows for the calibration error of the white standard (tiles are certified to ~1 %) and
 #: for noise. More than this is not a measurement error but a wrong calibration, percent
-#: values in a fraction column, or fluorescence, which the model does not describe.
+#: values in a fraction column, or fluorescence, which the model does not describe. The file
+#: readers apply it; a :class:`Measurement` built in Python (a simulation with noise, eq. 7,
+#: may exceed it) is only refused above :data:`PERCENT_THRESHOLD`.
 REFLECTANCE_MAX = 1.05
 #: Largest BRDF accepted [1/sr]. The BRDF of a perfect mirror seen by a detector of solid
 #: angle Omega is about 1 / Omega: 1e4 1/sr is a mirror through an aperture of 1e-4 sr (a cone
@@ -286,7 +288,7 @@ def wavelength_problem(wavelength_nm):
     )
 
 
-def value_problem(kind, values, *, percent=False):
+def value_problem(kind, values, *, percent=False, reflectance_max=REFLECTANCE_MAX):
     """The first value no instrument can report for a measurement ``kind``, or None.
 
     Parameters
@@ -297,6 +299,11 @@ def value_problem(kind, values, *, percent=False):
         Finite, non-negative fractions (BRDF in 1/sr).
     percent : bool
         Write reflectances in the message in percent (as the file gave them).
+    reflectance_max : float
+        Bound of hemispherical reflectances and specular transmittances [-]:
+        :data:`REFLECTANCE_MAX` for measured files; :class:`Measurement` itself
+        uses :data:`PERCENT_THRESHOLD`, since simulated values with noise (eq. 7)
+        may exceed 1.05.
 
     Returns
     -------
@@ -330,7 +337,7 @@ def value_problem(kind, values, *, percent=False):
                 "like percent; divide by 100"
             )
         return None
-    if value > REFLECTANCE_MAX:
+    if value > reflectance_max:
         what = "transmittance" if kind == "specular_transmittance" else "reflectance"
         if value > PERCENT_THRESHOLD and not percent:
             return top, (
@@ -425,7 +432,7 @@ class Measurement:
             raise _error(
                 f"values of {self.label} are negative (min {values.min():.4g})", field="values"
             )
-        bad = value_problem(self.kind, values)
+        bad = value_problem(self.kind, values, reflectance_max=PERCENT_THRESHOLD)
         if bad is not None:
             raise _error(f"values of {self.label}: {bad[1]}", field="values")
         object.__setattr__(self, "label", expected["label"])

@@ -476,3 +476,15 @@ def test_utf16_with_byte_order_mark_is_read(tmp_path):
     path = tmp_path / "utf16.csv"
     path.write_bytes(source.read_text(encoding="utf-8").encode("utf-16"))
     assert read_measurements(path) == read_csv(source)
+
+
+def test_measurement_in_python_refuses_percent_but_keeps_simulated_noise_above_one():
+    """Readers refuse 1.05 < R; a Measurement built in Python (e.g. simulated with eq. 7 noise)
+    only above the percent threshold."""
+    assert Measurement.from_geometry("hemispherical", "8d-sci", [1.2]).values[0] == 1.2
+    with pytest.raises(MeasurementError) as error:
+        Measurement.from_geometry("hemispherical", "8d-sci", [1.6])
+    assert only_problem(error) == (
+        "field 'values': values of 8d-sci: reflectance 1.6 exceeds 1.5: this looks like percent; "
+        "divide by 100"
+    )
