@@ -5,7 +5,8 @@ Usage:  python benchmarks/readers.py [ROWS ...]   (default 2000 4000 8000 16000 
 Writes synthetic files to a temporary folder: a bayespig CSV (two BRDF geometries per film,
 films over black), an ASTM E1392 file (one sample, one row per geometry) and a wide spectral
 table (Revigo layout, four spectra per film), all at 31 wavelengths, and reads each in a fresh
-process (``bayespig.data`` readers, progress off), printing wall and CPU seconds and the
+process ("check": ``bayespig check``'s report of the CSV file, summary included)
+(``bayespig.data`` readers, progress off), printing wall and CPU seconds and the
 process's peak resident memory. Doubling the rows should double the time and the memory above
 the interpreter's ~85 MB.
 """
@@ -55,9 +56,10 @@ READ = {
     "csv": "from bayespig.data import read_csv as r; r(p, progress=False)",
     "astm": "from bayespig.data import read_astm_e1392 as r; r(p, progress=False)",
     "table": "from bayespig.data import read_revigo as r; r(p, progress=False)",
+    "check": "from bayespig.data import check_report as r; r(p)",
 }
-WRITE = {"csv": write_csv, "astm": write_astm, "table": write_table}
-SUFFIX = {"csv": ".csv", "astm": ".astm", "table": ".txt"}
+WRITE = {"csv": write_csv, "astm": write_astm, "table": write_table, "check": write_csv}
+SUFFIX = {"csv": ".csv", "astm": ".astm", "table": ".txt", "check": ".csv"}
 
 
 def measure(kind, path):

@@ -857,14 +857,23 @@ class MeasurementSet:
         """Names of the samples, in order."""
         return tuple(s.name for s in self.samples)
 
-    def sample(self, name):
-        """The sample called ``name``."""
+    def _index(self):
+        """Name -> sample (built once: the samples of a frozen set never change)."""
         index = self.__dict__.get("_by_name")
         if index is None:
             index = {}
             for sample in reversed(self.samples):
                 index[getattr(sample, "name", None)] = sample
             object.__setattr__(self, "_by_name", index)
+        return index
+
+    def has_sample(self, name):
+        """True when a sample is called ``name`` (constant time)."""
+        return name in self._index()
+
+    def sample(self, name):
+        """The sample called ``name``."""
+        index = self._index()
         if name in index:
             return index[name]
         raise KeyError(f"no sample {name!r}; samples: {', '.join(self.sample_names)}")
@@ -923,7 +932,7 @@ class MeasurementSet:
             return np.zeros(self.n_wavelengths)
         if isinstance(film.substrate, float):
             return np.full(self.n_wavelengths, film.substrate)
-        if film.substrate in self.sample_names:
+        if self.has_sample(film.substrate):
             return _albedo_from_air(self.sample(film.substrate), self.n)
         return np.full(self.n_wavelengths, _NAMED_SUBSTRATES[film.substrate])
 
@@ -977,7 +986,7 @@ class MeasurementSet:
             keep = {name for name in keep if self.sample(name).role in roles}
         for name in list(keep):
             substrate = self.sample(name).substrate
-            if isinstance(substrate, str) and substrate in self.sample_names:
+            if isinstance(substrate, str) and self.has_sample(substrate):
                 keep.add(substrate)
         return MeasurementSet(
             self.wavelength_nm,
@@ -1306,7 +1315,7 @@ def _describe_substrate(measurements, sample):
         return "-"
     if isinstance(sample.substrate, float):
         return f"r_s = {sample.substrate:g}"
-    if sample.substrate in measurements.sample_names:
+    if isinstance(sample.substrate, str) and measurements.has_sample(sample.substrate):
         try:
             r_s = measurements.substrate_albedo(sample)
             return f"sample {sample.substrate!r} (r_s {r_s.min():.3g}–{r_s.max():.3g})"
