@@ -6,8 +6,8 @@ files, wide spectral tables such as the Revigo data), check it with
 can have raises :class:`MeasurementError` naming the file, row and field.
 """
 
-from .astm_e1392 import read_astm_e1392, write_astm_e1392
-from .csv_format import read_csv, write_csv
+from .astm_e1392 import read_astm_e1392
+from .csv_format import read_csv
 from .errors import MeasurementError, Problem
 from .io import check_report, read_measurements
 from .model import (
@@ -21,6 +21,7 @@ from .model import (
 )
 from .simulate import DESIGNS, FilmSpec, simulate, simulate_to_csv
 from .spectral_table import read_revigo, read_spectral_table
+from .writers import write_astm_e1392, write_csv
 
 __all__ = [
     "BLACK_SUBSTRATE_ALBEDO",

@@ -30,11 +30,16 @@ SAMPLE_FIELDS = (
     "eps",
 )
 
+#: Cards below these values cannot have an albedo under binder above 1, so their albedo is not
+#: computed for the warning about it: hemispherical/45-0 reflectance [-] and BRDF [1/sr]
+#: (eq. 9 inverted exceeds 1 only above about 1 - r_F = 0.96 and 0.35 1/sr at n = 1.45).
+CARD_CHECK_REFLECTANCE = 0.8
+CARD_CHECK_BRDF = 0.8 / math.pi
 _TRUE = ("yes", "y", "true", "1")
 _FALSE = ("no", "n", "false", "0")
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, slots=True)
 class Row:
     """One spectrum as read from a file.
 
@@ -238,11 +243,12 @@ def assemble(
     names = set(by_sample)
 
     measurements, where = {}, {}
+    valid_ids = {id(r) for r in valid_rows}
     for name, sample_rows in by_sample.items():
         seen = {}
         measurements[name] = []
         for r in sample_rows:
-            if r not in valid_rows or np.isnan(r.values).any():
+            if id(r) not in valid_ids or np.isnan(r.values).any():
                 continue  # already reported
             try:
                 m = Measurement.from_geometry(r.kind, r.geometry, r.values)
@@ -342,5 +348,63 @@ def assemble(
             )
         problems.append(r.locate(p))
     if problems:
-        raise MeasurementError(problems)
-    return MeasurementSet(wavelength_nm, samples, n=n, metadata=metadata or {}, source=source)
+        # A header keyword (ASTM E1392 ``ROLE``) is checked on each of its rows: once is enough.
+        raise MeasurementError(list(dict.fromkeys(problems)))
+    measurement_set = MeasurementSet(
+        wavelength_nm, samples, n=n, metadata=metadata or {}, source=source
+    )
+    _warn_implausible(measurement_set, where)
+    return measurement_set
+
+
+def _warn_implausible(measurement_set, where):
+    """One warning for values no sample gives but a calibration error can: above 1.
+
+    Hemispherical reflectances and specular transmittances in (1, REFLECTANCE_MAX]
+    (larger ones are refused), and bare substrates (cards) whose albedo under
+    binder (eq. 9 inverted) would exceed 1, are named with their row and field.
+    """
+    found = []
+    by_name = {s.name: s for s in measurement_set.samples}
+    for (name, index), r in where.items():
+        m = by_name[name].measurements[index]
+        if m.kind in ("hemispherical", "specular_transmittance") and m.values.max() > 1.0:
+            top = int(np.argmax(m.values))
+            what = "transmittance" if m.kind == "specular_transmittance" else "reflectance"
+            found.append(
+                f"row {r.row}, field {r.wavelength_fields[top]!r}: {what} "
+                f"{m.values[top]:.4g} ({m.values[top] * 100:.4g} %) is above 1"
+            )
+    cards = {}
+    for film in measurement_set.films:
+        if isinstance(film.substrate, str) and film.substrate in by_name and not film.opaque:
+            cards.setdefault(film.substrate, film)
+    # Only bright cards can have an albedo above 1 (eq. 9 inverted needs a reflectance above
+    # about 1 - r_F, a BRDF above about 0.3 1/sr); skip the integrals for the others.
+    cards = {
+        card: film
+        for card, film in cards.items()
+        if any(
+            m.values.max() > (CARD_CHECK_BRDF if m.kind == "brdf" else CARD_CHECK_REFLECTANCE)
+            for m in by_name[card].measurements
+        )
+    }
+    for card, film in cards.items():
+        try:
+            measurement_set.substrate_albedo(film)
+        except MeasurementError as error:
+            r = where.get((card, error.problems[0].measurement or 0))
+            found.append(
+                f"row {r.row if r else '?'}: card {card!r}: albedo under binder above 1 "
+                "(eq. 9 inverted); it cannot serve as a measured substrate"
+            )
+    if found:
+        more = f" (and {len(found) - 3} more)" if len(found) > 3 else ""
+        warnings.warn(
+            f"{measurement_set.source}: {'; '.join(found[:3])}{more}: no sample reflects or "
+            "transmits more than it receives; values slightly above 1 come from the white "
+            "standard's calibration error, which the model does not describe: check the "
+            "calibration",
+            UserWarning,
+            stacklevel=4,
+        )

@@ -29,7 +29,6 @@ measurement set.
 
 from __future__ import annotations
 
-import io
 import json
 import math
 import os
@@ -40,23 +39,12 @@ from pathlib import Path
 import numpy as np
 
 from ._assemble import Row, assemble, parse_number
-from .csv_format import _fmt, _lines
-from .errors import MeasurementError, Problem, atomic_write_text
+from ._source import Source, load
+from .errors import MeasurementError, Problem
+from .model import value_problem, wavelength_problem
+from .writers import ANGLE_COLUMNS, KEYWORDS, _fmt
 
-__all__ = ["looks_like_astm_e1392", "read_astm_e1392", "write_astm_e1392"]
-
-FORMAT_LINE = "#FORMAT=ASTM-E1392-96"
-ANGLE_COLUMNS = ("theta_i", "phi_i", "theta_s", "phi_s")
-#: Header keywords bayespig interprets -> sample attribute.
-KEYWORDS = {
-    "ROLE": "role",
-    "SUBSTRATE": "substrate",
-    "FILM_GROUP": "film_group",
-    "OPAQUE": "opaque",
-    "THICKNESS_UM": "thickness_um",
-    "CONCENTRATION": "concentration",
-    "EPS": "eps",
-}
+__all__ = ["looks_like_astm_e1392", "read_astm_e1392"]
 #: Decimals of a degree kept when converting angles from radians.
 ANGLE_DECIMALS = 4
 
@@ -64,15 +52,17 @@ _WAVELENGTH = re.compile(r"^\s*(\d+(?:\.\d*)?)\s*(?:nm)?\s*$", re.IGNORECASE)
 _KEYWORD = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)(?:\s+(.*))?$")
 
 
-def looks_like_astm_e1392(path):
-    """True for ASTM E1392 text files (``.astm`` suffix, a ``#FORMAT=ASTM`` or ``VARS`` line)."""
-    if Path(path).suffix.lower() == ".astm":
+def looks_like_astm_e1392(source):
+    """True for ASTM E1392 text (``.astm`` suffix, a ``#FORMAT=ASTM`` or ``VARS`` line).
+
+    Parameters
+    ----------
+    source : Source
+        The file, read once (:func:`bayespig.data._source.load`).
+    """
+    if Path(source.name).suffix.lower() == ".astm":
         return True
-    try:
-        with open(path, encoding="utf-8", errors="replace") as handle:
-            head = [handle.readline() for _ in range(200)]
-    except OSError:
-        return False
+    head = source.head().splitlines()[:200]
     return any(line.upper().startswith(("#FORMAT=ASTM", "VARS ")) for line in head)
 
 
@@ -86,10 +76,22 @@ def _split(line):
     return [cell.strip() for cell in (line.split(",") if "," in line else line.split())]
 
 
-def _read_one(path, defaults, problems):
+def _fast_numbers(cells):
+    """The numbers of a data row when all are finite and the BRDFs >= 0 (else None: check each)."""
+    try:
+        numbers = np.array(cells, dtype=float)
+    except ValueError:
+        return None
+    if not np.isfinite(numbers).all() or (numbers[4:] < 0).any():
+        return None
+    return numbers.tolist()
+
+
+def _read_one(path, defaults, problems, progress):
     """Rows, wavelengths, binder index and metadata of one file."""
-    name = str(path)
-    lines = _lines(path)
+    source = load(path)
+    name = source.name
+    lines = source.take_lines("astm_e1392")
     header, header_rows, vars_index = {}, {}, None
     for index, line in enumerate(lines):
         stripped = line.strip()
@@ -165,6 +167,11 @@ def _read_one(path, defaults, problems):
                 field="VARS",
             )
         )
+    elif unit := wavelength_problem(wavelength_nm):
+        wavelength_columns = [c for c in names[4:] if _WAVELENGTH.match(c)]
+        problems.append(
+            Problem(unit[1], file=name, row=vars_row, field=wavelength_columns[unit[0]])
+        )
     if problems and any(p.file == name for p in problems):
         return None
 
@@ -220,8 +227,12 @@ def _read_one(path, defaults, problems):
 
     rows = []
     n_columns = 4 + len(wavelength_nm)
+    wavelength_fields = [f"{_fmt(w)}nm" for w in wavelength_nm]
+    update = source.progress(progress, len(lines))
     for index in range(vars_index + 1, len(lines)):
         line, row_number = lines[index].strip(), index + 1
+        lines[index] = None  # parsed: free it
+        update(index)
         if not line or line.startswith("#"):
             continue
         cells = _split(line)
@@ -232,27 +243,32 @@ def _read_one(path, defaults, problems):
                 )
             )
             continue
-        numbers, valid = [], True
-        for column, cell in zip(names, cells):
-            try:
-                value = parse_number(cell)
-            except ValueError as error:
-                problems.append(Problem(str(error), file=name, row=row_number, field=column))
-                valid = False
-                continue
-            if not math.isfinite(value):
-                problems.append(
-                    Problem(
-                        f"value {cell!r} is not finite", file=name, row=row_number, field=column
+        numbers, valid = _fast_numbers(cells), True
+        if numbers is None:
+            numbers = []
+            for column, cell in zip(names, cells):
+                try:
+                    value = parse_number(cell)
+                except ValueError as error:
+                    problems.append(Problem(str(error), file=name, row=row_number, field=column))
+                    valid = False
+                    continue
+                if not math.isfinite(value):
+                    problems.append(
+                        Problem(
+                            f"value {cell!r} is not finite", file=name, row=row_number, field=column
+                        )
                     )
-                )
-                valid = False
-            elif len(numbers) >= 4 and value < 0:
-                problems.append(
-                    Problem(f"negative BRDF {cell}", file=name, row=row_number, field=column)
-                )
-                valid = False
-            numbers.append(value)
+                    valid = False
+                elif len(numbers) >= 4 and value < 0:
+                    problems.append(
+                        Problem(f"negative BRDF {cell}", file=name, row=row_number, field=column)
+                    )
+                    valid = False
+                numbers.append(value)
+        if valid and (bad := value_problem("brdf", numbers[4:])):
+            problems.append(Problem(bad[1], file=name, row=row_number, field=names[4 + bad[0]]))
+            valid = False
         if not valid:
             continue
         angles = numbers[:4]
@@ -298,11 +314,12 @@ def _read_one(path, defaults, problems):
                 np.array(numbers[4:]),
                 dict(attributes),
                 dict(fields),
-                [f"{_fmt(w)}nm" for w in wavelength_nm],
+                wavelength_fields,
                 True,
                 dict(field_rows),
             )
         )
+    update.close()
     if num_points is not None:
         try:
             expected = int(num_points)
@@ -323,11 +340,19 @@ def _read_one(path, defaults, problems):
             )
     if not rows and not any(p.file == name for p in problems):
         problems.append(Problem("no data rows after VARS", file=name, row=vars_row))
-    return rows, np.array(wavelength_nm), n, metadata
+    return name, rows, np.array(wavelength_nm), n, metadata
 
 
 def read_astm_e1392(
-    paths, *, name=None, role=None, substrate=None, opaque=None, film_group=None, resample=False
+    paths,
+    *,
+    name=None,
+    role=None,
+    substrate=None,
+    opaque=None,
+    film_group=None,
+    resample=False,
+    progress=None,
 ):
     """Read one or several ASTM E1392 BRDF files into one measurement set.
 
@@ -343,6 +368,10 @@ def read_astm_e1392(
     resample : bool
         Interpolate files with different wavelengths onto the wavelengths all
         cover (with a warning) instead of raising.
+    progress : None, bool or callable
+        Progress while reading: None shows a bar on stderr for files larger
+        than 20 MB; False nothing; a callable is called as ``progress(lines_read,
+        lines_total)`` for each file.
 
     Returns
     -------
@@ -353,7 +382,7 @@ def read_astm_e1392(
     MeasurementError
         Listing every problem with file, row (line number) and field.
     """
-    if isinstance(paths, (str, os.PathLike)):
+    if isinstance(paths, (str, os.PathLike, Source)):
         paths = [paths]
     paths = list(paths)
     if not paths:
@@ -362,10 +391,10 @@ def read_astm_e1392(
     problems, files = [], []
     for path in paths:
         result = _read_one(
-            path, defaults if len(paths) == 1 else {**defaults, "name": None}, problems
+            path, defaults if len(paths) == 1 else {**defaults, "name": None}, problems, progress
         )
         if result is not None:
-            files.append((str(path), *result))
+            files.append((result[0], *result[1:]))
     if not files:
         raise MeasurementError(problems)
     grid = np.unique(np.concatenate([f[2] for f in files]))
@@ -405,74 +434,3 @@ def read_astm_e1392(
         resample=resample,
         problems=problems,
     )
-
-
-def format_astm_e1392(measurements, sample=None):
-    """ASTM E1392 text of one sample's BRDFs (see :func:`write_astm_e1392`)."""
-    brdf_samples = [
-        s for s in measurements.samples if any(m.kind == "brdf" for m in s.measurements)
-    ]
-    if sample is None:
-        if len(measurements.samples) != 1:
-            raise ValueError(
-                "an ASTM E1392 file holds one sample; choose one with sample= from "
-                f"{', '.join(measurements.sample_names)}"
-            )
-        chosen = measurements.samples[0]
-    else:
-        chosen = measurements.sample(sample) if isinstance(sample, str) else sample
-    other = [m.kind for m in chosen.measurements if m.kind != "brdf"]
-    if other or chosen not in brdf_samples:
-        raise ValueError(
-            f"sample {chosen.name!r} has {', '.join(sorted(set(other))) or 'no BRDF'} "
-            "measurements; "
-            "ASTM E1392 files hold BRDFs only: write it as bayespig CSV instead"
-        )
-    out = io.StringIO()
-    out.write(f"{FORMAT_LINE}\n")
-    out.write(
-        "# bayespig: BRDF [1/sr] without the surface's specular reflection; angles in radians; "
-        "phi_s = phi_i + pi is the specular side\n"
-    )
-    out.write(f"NAME {chosen.name}\nROLE {chosen.role}\n")
-    for keyword, attribute in KEYWORDS.items():
-        value = getattr(chosen, attribute)
-        if attribute in ("role",) or value is None:
-            continue
-        if attribute == "opaque":
-            out.write(f"OPAQUE {'yes' if value else 'no'}\n")
-        else:
-            out.write(f"{keyword} {_fmt(value) if isinstance(value, float) else value}\n")
-    out.write(f"N {_fmt(measurements.n)}\n")
-    if measurements.metadata:
-        out.write(f"BAYESPIG_METADATA {json.dumps(dict(measurements.metadata))}\n")
-    out.write(f"NUM_POINTS {len(chosen.measurements)}\n")
-    out.write(
-        "VARS "
-        + ",".join([*ANGLE_COLUMNS, *(f"{_fmt(w)}nm" for w in measurements.wavelength_nm)])
-        + "\n"
-    )
-    for m in chosen.measurements:
-        angles = (math.radians(m.theta_i), 0.0, math.radians(m.theta_o), math.radians(m.delta_phi))
-        out.write(",".join(_fmt(x) for x in (*angles, *m.values)) + "\n")
-    return out.getvalue()
-
-
-def write_astm_e1392(measurements, path, *, sample=None):
-    """Write one sample's BRDFs as an ASTM E1392 text file, atomically.
-
-    Parameters
-    ----------
-    measurements : MeasurementSet
-    path : str or os.PathLike
-    sample : str, optional
-        The sample to write (required when the set has several). A film whose
-        substrate is a substrate sample needs that sample's file too when read
-        back: ``read_astm_e1392([film_file, card_file])``.
-
-    Raises
-    ------
-    ValueError
-        When the sample has measurements other than BRDFs.
-    """
-    atomic_write_text(path, format_astm_e1392(measurements, sample))

@@ -10,8 +10,11 @@
 
 Lines starting with ``#`` before the column header are ``# key: value``
 settings (``units``: ``fraction`` or ``percent``; ``n``: binder refractive
-index; ``format``; anything else is kept as metadata, read as JSON when it
-parses as JSON and as text otherwise); other ``#`` lines are comments.
+index; ``format``; ``metadata``: a JSON object of metadata, used by the writer for
+keys that cannot be ``# key:`` lines of their own; anything else is kept as
+metadata, read as JSON when it parses as JSON and as text otherwise); other
+``#`` lines are comments. A sample name starting with ``#`` is quoted
+(``"#1"``) so that its row is not a comment.
 Required columns: ``sample``, ``role``, ``measurement``, ``geometry`` and at
 least one wavelength column (a number in nm, e.g. ``400`` or ``400nm``);
 optional: ``substrate``, ``film_group``, ``opaque``, ``thickness_um``,
@@ -23,50 +26,26 @@ from __future__ import annotations
 
 import csv
 import difflib
-import io
 import json
 import re
 from itertools import pairwise
-from pathlib import Path
 
 import numpy as np
 
 from ._assemble import SAMPLE_FIELDS, Row, assemble, parse_number
-from .errors import MeasurementError, Problem, atomic_write_text
-from .model import MEASUREMENT_KINDS, PERCENT_THRESHOLD
+from ._source import load
+from .errors import MeasurementError, Problem
+from .model import MEASUREMENT_KINDS, PERCENT_THRESHOLD, value_problem, wavelength_problem
+from .writers import FORMAT_NAME, METADATA_KEY
 
-__all__ = ["FORMAT_NAME", "format_csv", "read_csv", "write_csv"]
+__all__ = ["FORMAT_NAME", "read_csv"]
 
-#: Value of the ``# format:`` line the writer emits.
-FORMAT_NAME = "bayespig-measurements-1"
 REQUIRED_COLUMNS = ("sample", "role", "measurement", "geometry")
 OPTIONAL_COLUMNS = ("substrate", "film_group", "opaque", "thickness_um", "concentration", "eps")
-#: ``# key:`` settings with a meaning; any other key is metadata.
-SETTINGS = ("format", "units", "n")
 UNITS = ("fraction", "percent")
 
 _DIRECTIVE = re.compile(r"^#\s*([A-Za-z_][\w.\-]*)\s*:\s?(.*)$")
 _WAVELENGTH = re.compile(r"^\s*(\d+(?:\.\d*)?)\s*(?:nm)?\s*$", re.IGNORECASE)
-
-
-def _lines(path):
-    """The file's lines (universal newlines), or a MeasurementError for unreadable files."""
-    name = str(path)
-    try:
-        data = Path(path).read_bytes()
-    except FileNotFoundError:
-        raise MeasurementError(Problem("file not found", file=name)) from None
-    except OSError as error:
-        raise MeasurementError(
-            Problem(f"cannot read the file: {error.strerror or error}", file=name)
-        ) from None
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as error:
-        raise MeasurementError(
-            Problem(f"not UTF-8 text (byte {error.start}); save the file as UTF-8 CSV", file=name)
-        ) from None
-    return text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
 
 
 def _split(line, delimiter):
@@ -89,7 +68,7 @@ def _column_kind(name):
     return "unknown", name.strip()
 
 
-def read_csv(path, *, resample=False):
+def read_csv(path, *, resample=False, progress=None):
     """Read a bayespig CSV file.
 
     Parameters
@@ -99,6 +78,10 @@ def read_csv(path, *, resample=False):
         When rows have blank cells (wavelengths that differ between samples),
         interpolate every row linearly onto the wavelengths they all cover, with
         a warning, instead of raising.
+    progress : None, bool or callable
+        Progress while reading: None shows a bar on stderr for files larger
+        than 20 MB; False nothing; a callable is called as ``progress(lines_read,
+        lines_total)``.
 
     Returns
     -------
@@ -109,8 +92,9 @@ def read_csv(path, *, resample=False):
     MeasurementError
         Listing every problem, each with the file, row (line number) and field.
     """
-    name = str(path)
-    lines = _lines(path)
+    source = load(path)
+    name = source.name
+    lines = source.take_lines("csv")
     problems, metadata, settings = [], {}, {"units": None, "n": 1.45}
     header_index = None
     for index, line in enumerate(lines):
@@ -222,6 +206,10 @@ def read_csv(path, *, resample=False):
                 field=next(b[2] for a, b in pairwise(wavelength_columns) if b[0] <= a[0]),
             )
         )
+    elif unit := wavelength_problem([w for w, _, _ in wavelength_columns]):
+        problems.append(
+            Problem(unit[1], file=name, row=header_row, field=wavelength_columns[unit[0]][2])
+        )
     if problems:
         raise MeasurementError(problems)
 
@@ -229,8 +217,11 @@ def read_csv(path, *, resample=False):
     wavelength_fields = [cell for _, _, cell in wavelength_columns]
     scale = 0.01 if settings["units"] == "percent" else 1.0
     rows = []
+    update = source.progress(progress, len(lines))
     for index in range(header_index + 1, len(lines)):
         line, row_number = lines[index], index + 1
+        lines[index] = None  # parsed: free it
+        update(index)
         if not line.strip() or line.lstrip().startswith("#"):
             continue
         try:
@@ -261,6 +252,7 @@ def read_csv(path, *, resample=False):
         )
         if row is not None:
             rows.append(row)
+    update.close()
     if not rows and not problems:
         problems.append(
             Problem("the file has a header but no data rows", file=name, row=header_row)
@@ -322,6 +314,27 @@ def _directive(key, value, name, row, settings, metadata, problems):
             problems.append(
                 Problem(f"binder refractive index n: {error}", file=name, row=row, field="n")
             )
+    elif lowered == METADATA_KEY:
+        try:
+            value = json.loads(value)
+        except (ValueError, RecursionError):
+            value = None
+        if not isinstance(value, dict):
+            problems.append(
+                Problem(
+                    f"'# {METADATA_KEY}:' must be followed by a JSON object",
+                    file=name,
+                    row=row,
+                    field=key,
+                )
+            )
+            return
+        for item, item_value in value.items():
+            if item in metadata:
+                problems.append(
+                    Problem(f"metadata key {item!r} is given twice", file=name, row=row, field=key)
+                )
+            metadata[item] = item_value
     elif key in metadata:
         problems.append(
             Problem(f"metadata key {key!r} is given twice", file=name, row=row, field=key)
@@ -335,6 +348,23 @@ def _directive(key, value, name, row, settings, metadata, problems):
             problems.append(
                 Problem("metadata value nested too deeply", file=name, row=row, field=key)
             )
+
+
+def _fast_values(texts):
+    """The values of a row's cells when all are plain numbers >= 0 (else None: check each).
+
+    Blank cells (wavelengths not measured) are NaN.
+    """
+    try:
+        values = np.array([t if t.strip() else "nan" for t in texts], dtype=float)
+    except ValueError:
+        return None
+    blank = np.isnan(values)
+    if not (np.isfinite(values) | blank).all() or (values < 0).any():
+        return None
+    if blank.any() and any(t.strip().lower() == "nan" for t in texts):
+        return None  # a written NaN is reported, unlike a blank cell
+    return values
 
 
 def _parse_row(
@@ -359,46 +389,50 @@ def _parse_row(
             )
         )
         valid = False
-    values = np.full(len(wavelength_columns), np.nan)
-    for k, (_, position, cell) in enumerate(wavelength_columns):
-        text = cells[position].strip()
-        if not text:
-            continue
-        try:
-            value = parse_number(text)
-        except ValueError as error:
-            problems.append(Problem(str(error), file=name, row=row_number, field=cell))
-            valid = False
-            continue
-        if np.isnan(value):
-            problems.append(
-                Problem(
-                    "value is NaN; give a measured value (or leave the cell blank when this "
-                    "wavelength was not measured)",
-                    file=name,
-                    row=row_number,
-                    field=cell,
+    values = _fast_values([cells[position] for _, position, _ in wavelength_columns])
+    if values is not None:
+        values = values * scale
+    else:
+        values = np.full(len(wavelength_columns), np.nan)
+        for k, (_, position, cell) in enumerate(wavelength_columns):
+            text = cells[position].strip()
+            if not text:
+                continue
+            try:
+                value = parse_number(text)
+            except ValueError as error:
+                problems.append(Problem(str(error), file=name, row=row_number, field=cell))
+                valid = False
+                continue
+            if np.isnan(value):
+                problems.append(
+                    Problem(
+                        "value is NaN; give a measured value (or leave the cell blank when this "
+                        "wavelength was not measured)",
+                        file=name,
+                        row=row_number,
+                        field=cell,
+                    )
                 )
-            )
-            valid = False
-        elif not np.isfinite(value):
-            problems.append(
-                Problem(f"value {text!r} is not finite", file=name, row=row_number, field=cell)
-            )
-            valid = False
-        elif value < 0:
-            problems.append(
-                Problem(
-                    f"negative value {text}; reflectances and transmittances are >= 0",
-                    file=name,
-                    row=row_number,
-                    field=cell,
+                valid = False
+            elif not np.isfinite(value):
+                problems.append(
+                    Problem(f"value {text!r} is not finite", file=name, row=row_number, field=cell)
                 )
-            )
-            valid = False
-        values[k] = value * scale
+                valid = False
+            elif value < 0:
+                problems.append(
+                    Problem(
+                        f"negative value {text}; reflectances and transmittances are >= 0",
+                        file=name,
+                        row=row_number,
+                        field=cell,
+                    )
+                )
+                valid = False
+            values[k] = value * scale
     if valid:
-        high = np.nan_to_num(values, nan=-np.inf)
+        high = np.where(np.isnan(values), -np.inf, values)
         top = int(np.argmax(high))
         if high[top] > PERCENT_THRESHOLD and (units != "fraction" or kind != "brdf"):
             if units == "percent":
@@ -418,6 +452,14 @@ def _parse_row(
                 Problem(message, file=name, row=row_number, field=wavelength_columns[top][2])
             )
             valid = False
+        elif kind in MEASUREMENT_KINDS and (
+            bad := value_problem(kind, np.fmax(high, 0.0), percent=units == "percent")
+        ):
+            top, message = bad
+            problems.append(
+                Problem(message, file=name, row=row_number, field=wavelength_columns[top][2])
+            )
+            valid = False
     attributes = {key: get[key] for key in SAMPLE_FIELDS if key in get}
     return Row(
         name,
@@ -427,68 +469,6 @@ def _parse_row(
         get["geometry"],
         values,
         attributes,
-        wavelength_fields=list(wavelength_fields),
+        wavelength_fields=wavelength_fields,  # shared by all rows, never changed in place
         valid=valid,
     )
-
-
-def _fmt(x):
-    """Shortest text that reads back as the same float (``400`` for 400.0)."""
-    text = repr(float(x))
-    return text.removesuffix(".0")
-
-
-def format_csv(measurements):
-    """The bayespig CSV text of a :class:`~bayespig.data.model.MeasurementSet`."""
-    for key in measurements.metadata:
-        if not re.fullmatch(r"[A-Za-z_][\w.\-]*", key) or key.lower() in SETTINGS:
-            raise ValueError(
-                f"metadata key {key!r} cannot be written: keys are letters, digits, '_', '.', '-' "
-                f"and not one of {', '.join(SETTINGS)}"
-            )
-    out = io.StringIO()
-    out.write(f"# format: {FORMAT_NAME}\n# units: fraction\n# n: {_fmt(measurements.n)}\n")
-    for key, value in measurements.metadata.items():
-        out.write(f"# {key}: {json.dumps(value)}\n")
-    optional = [
-        c
-        for c in ("thickness_um", "concentration", "eps")
-        if any(getattr(s, c) is not None for s in measurements.samples)
-    ]
-    header = [
-        "sample",
-        "role",
-        "substrate",
-        "film_group",
-        "opaque",
-        *optional,
-        "measurement",
-        "geometry",
-    ]
-    writer = csv.writer(out, lineterminator="\n")
-    writer.writerow(header + [_fmt(w) for w in measurements.wavelength_nm])
-    for s in measurements.samples:
-        substrate = (
-            ""
-            if s.substrate is None
-            else (_fmt(s.substrate) if isinstance(s.substrate, float) else s.substrate)
-        )
-        fixed = [s.name, s.role, substrate, s.film_group or "", "yes" if s.opaque else "no"]
-        fixed += ["" if getattr(s, c) is None else _fmt(getattr(s, c)) for c in optional]
-        for m in s.measurements:
-            writer.writerow(fixed + [m.kind, m.label] + [_fmt(v) for v in m.values])
-    return out.getvalue()
-
-
-def write_csv(measurements, path):
-    """Write a measurement set as a bayespig CSV file, atomically (nothing is written on error).
-
-    Values are written with full precision, so reading the file back gives
-    identical arrays and metadata.
-
-    Parameters
-    ----------
-    measurements : MeasurementSet
-    path : str or os.PathLike
-    """
-    atomic_write_text(path, format_csv(measurements))

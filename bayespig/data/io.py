@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from ._source import Source, load
 from .astm_e1392 import looks_like_astm_e1392, read_astm_e1392
 from .csv_format import read_csv
 from .errors import MeasurementError, Problem
@@ -14,23 +15,45 @@ from .spectral_table import looks_like_spectral_table, read_revigo
 __all__ = ["check_report", "file_format", "read_all", "read_measurements"]
 
 
+def _open(path):
+    """A folder as it is, any other path read once into a :class:`Source`."""
+    if isinstance(path, Source):
+        return path
+    try:
+        if Path(path).is_dir():
+            return Path(path)
+    except OSError:
+        pass  # a symbolic link loop, ...: load() says so in plain words
+    return load(path)
+
+
 def file_format(path):
-    """``"csv"``, ``"astm_e1392"`` or ``"spectral_table"``, from the suffix and the content."""
-    path = Path(path)
-    if path.is_dir() or looks_like_spectral_table(path):
+    """``"csv"``, ``"astm_e1392"`` or ``"spectral_table"``, from the suffix and the content.
+
+    Parameters
+    ----------
+    path : str, os.PathLike or Source
+        A folder is a spectral table (Revigo layout); a file is read once.
+    """
+    source = _open(path)
+    if isinstance(source, Path) or looks_like_spectral_table(source):
         return "spectral_table"
-    if looks_like_astm_e1392(path):
+    if looks_like_astm_e1392(source):
         return "astm_e1392"
     return "csv"
 
 
+def _read(source, kind, resample):
+    if kind == "spectral_table":
+        return read_revigo(source)
+    reader = read_astm_e1392 if kind == "astm_e1392" else read_csv
+    return {Path(str(getattr(source, "name", source))).stem: reader(source, resample=resample)}
+
+
 def read_all(path, *, resample=False):
     """Every measurement set in a file: film id -> set (CSV and E1392: one, keyed by file name)."""
-    kind = file_format(path)
-    if kind == "spectral_table":
-        return read_revigo(path)
-    reader = read_astm_e1392 if kind == "astm_e1392" else read_csv
-    return {Path(path).stem: reader(path, resample=resample)}
+    source = _open(path)
+    return _read(source, file_format(source), resample)
 
 
 def read_measurements(path, *, film=None, resample=False):
@@ -40,7 +63,8 @@ def read_measurements(path, *, film=None, resample=False):
     ----------
     path : str, os.PathLike or sequence of them
         A bayespig CSV file; an ASTM E1392 file (or a list of them, one per
-        sample); a wide spectral table or its folder (Revigo convention).
+        sample); a wide spectral table or its folder (Revigo convention). The
+        file is read once, so a pipe (``<(cat file)``, ``/dev/stdin``) works.
     film : str, optional
         For spectral tables holding several films: the film id to return.
     resample : bool
@@ -58,10 +82,9 @@ def read_measurements(path, *, film=None, resample=False):
     """
     if isinstance(path, MeasurementSet):
         return path
-    if not isinstance(path, (str, os.PathLike)):
+    if not isinstance(path, (str, os.PathLike, Source, Path)):
         return read_astm_e1392(list(path), resample=resample)
-    if not Path(path).exists():
-        raise MeasurementError(Problem("file not found", file=str(path)))
+    path = _open(path)
     kind = file_format(path)
     if kind == "spectral_table":
         sets = read_revigo(path)
@@ -75,7 +98,7 @@ def read_measurements(path, *, film=None, resample=False):
                     "(or read them all with bayespig.data.read_revigo)"
                     if film is None
                     else f"no film {film!r} in the table; films: {shown}",
-                    file=str(path),
+                    file=str(getattr(path, "name", path)),
                     field="film",
                 )
             )
@@ -104,8 +127,9 @@ def check_report(path):
     MeasurementError
         Listing every problem found (file, row, field), when the file is invalid.
     """
-    sets = read_all(path)
-    kind = file_format(path)
+    source = _open(path)
+    kind = file_format(source)
+    sets = _read(source, kind, False)
     lines = [f"{path}: {kind.replace('_', ' ')} file, valid"]
     if len(sets) == 1:
         lines.append(next(iter(sets.values())).summary())

@@ -20,10 +20,12 @@ reflection), reflectances and transmittances in [0, 1].
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import re
 import types
+import unicodedata
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -32,16 +34,20 @@ from ..instruments import Channel, Instrument
 from ..physics.geometry import parse_geometry_label
 from ..physics.substrate import substrate_albedo_from_air
 from .errors import MeasurementError, Problem
+from .writers import write_astm_e1392, write_csv
 
 __all__ = [
     "BLACK_SUBSTRATE_ALBEDO",
+    "BRDF_MAX",
     "FILM_ROLES",
     "MEASUREMENT_KINDS",
     "METHODS",
     "PERCENT_THRESHOLD",
     "REFLECTANCE_KINDS",
+    "REFLECTANCE_MAX",
     "ROLES",
     "SUBSTRATE_ROLES",
+    "WAVELENGTH_RANGE_NM",
     "WHITE_SUBSTRATE_ALBEDO",
     "Measurement",
     "MeasurementSet",
@@ -68,8 +74,28 @@ BLACK_SUBSTRATE_ALBEDO = 0.01
 WHITE_SUBSTRATE_ALBEDO = 0.95
 #: A reflectance or transmittance above this is taken for a value in percent [-].
 PERCENT_THRESHOLD = 1.5
+#: Largest hemispherical reflectance or specular transmittance accepted [-]. A passive,
+#: non-fluorescent sample cannot send back more light than it receives (1); 0.05 above that
+#: allows for the calibration error of the white standard (tiles are certified to ~1 %) and
+#: for noise. More than this is not a measurement error but a wrong calibration, percent
+#: values in a fraction column, or fluorescence, which the model does not describe. The file
+#: readers apply it; a :class:`Measurement` built in Python (a simulation with noise, eq. 7,
+#: may exceed it) is only refused above :data:`PERCENT_THRESHOLD`.
+REFLECTANCE_MAX = 1.05
+#: Largest BRDF accepted [1/sr]. The BRDF of a perfect mirror seen by a detector of solid
+#: angle Omega is about 1 / Omega: 1e4 1/sr is a mirror through an aperture of 1e-4 sr (a cone
+#: of 0.32 deg half-angle), beyond the sharpest gonio-spectrophotometers; bayespig's BRDFs
+#: exclude the surface's mirror reflection, and the near-mirror peaks of the Cornell
+#: measurements reach 66 1/sr.
+BRDF_MAX = 1e4
+#: Wavelengths accepted [nm]: the range of UV-visible-NIR spectrophotometers (e.g. 175-3300 nm
+#: for a PerkinElmer Lambda 1050). Wavelengths in micrometres (0.4-0.7) or angstroms
+#: (4000-7000) fall outside it and are named as such.
+WAVELENGTH_RANGE_NM = (170.0, 3300.0)
 #: Angles are rounded to this many decimals of a degree when parsed.
 ANGLE_DECIMALS = 6
+#: Sample names shown by ``repr`` of a measurement set.
+REPR_SAMPLES = 8
 
 _NAMED_SUBSTRATES = {"black": BLACK_SUBSTRATE_ALBEDO, "white": WHITE_SUBSTRATE_ALBEDO}
 _HEMISPHERICAL = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*d\s*[-_ ]?\s*(sci|sce)\s*$", re.IGNORECASE)
@@ -148,6 +174,13 @@ def parse_measurement_geometry(kind, text):
         geometry is the specular direction.
     """
     text = "" if text is None else str(text).strip()
+    return dict(_parse_measurement_geometry(kind, text))
+
+
+@functools.lru_cache(maxsize=4096)
+def _parse_measurement_geometry(kind, text):
+    """:func:`parse_measurement_geometry` of stripped text (cached)."""
+    text = "" if text is None else str(text).strip()
     if kind == "brdf":
         triple = _TRIPLE.match(text)
         if triple:
@@ -218,6 +251,111 @@ def parse_measurement_geometry(kind, text):
             )
         return dict(theta_i=0.0, theta_o=0.0, delta_phi=180.0, specular=None, label="normal")
     raise ValueError(f"measurement must be one of {', '.join(MEASUREMENT_KINDS)}, got {kind!r}")
+
+
+def wavelength_problem(wavelength_nm):
+    """Why wavelengths cannot be nanometres (guessing their unit), or None when they can.
+
+    Parameters
+    ----------
+    wavelength_nm : array_like
+        Finite wavelengths [nm].
+
+    Returns
+    -------
+    tuple (int, str) or None
+        Index of the first wavelength outside :data:`WAVELENGTH_RANGE_NM`, and the message.
+    """
+    wavelength = np.asarray(wavelength_nm, dtype=float)
+    low, high = WAVELENGTH_RANGE_NM
+    outside = np.flatnonzero((wavelength < low) | (wavelength > high))
+    if wavelength.size == 0 or outside.size == 0:
+        return None
+    first, last = wavelength.min(), wavelength.max()
+    span = f"{first:.10g}–{last:.10g}" if first != last else f"{first:.10g}"
+    if low / 1000 <= first and last <= high / 1000:
+        unit, fix = "micrometres", "multiply them by 1000"
+    elif low * 10 <= first and last <= high * 10:
+        unit, fix = "ångströms", "divide them by 10"
+    else:
+        value = wavelength[outside[0]]
+        return int(outside[0]), (
+            f"wavelength {value:.10g} nm is outside {low:g}–{high:g} nm, the range of UV–visible–NIR "
+            "spectrophotometers; give wavelengths in nanometres"
+        )
+    return int(outside[0]), (
+        f"wavelengths {span} look like {unit}; bayespig wants nanometres ({fix})"
+    )
+
+
+def value_problem(kind, values, *, percent=False, reflectance_max=REFLECTANCE_MAX):
+    """The first value no instrument can report for a measurement ``kind``, or None.
+
+    Parameters
+    ----------
+    kind : str
+        Measurement kind.
+    values : numpy.ndarray
+        Finite, non-negative fractions (BRDF in 1/sr).
+    percent : bool
+        Write reflectances in the message in percent (as the file gave them).
+    reflectance_max : float
+        Bound of hemispherical reflectances and specular transmittances [-]:
+        :data:`REFLECTANCE_MAX` for measured files; :class:`Measurement` itself
+        uses :data:`PERCENT_THRESHOLD`, since simulated values with noise (eq. 7)
+        may exceed 1.05.
+
+    Returns
+    -------
+    tuple (int, str) or None
+        Index of the largest offending value and a message naming the bound
+        (:data:`BRDF_MAX` for BRDFs, :data:`REFLECTANCE_MAX` for hemispherical
+        reflectances and specular transmittances, :data:`PERCENT_THRESHOLD` for
+        45°/0° reflectance factors).
+    """
+    values = np.asarray(values, dtype=float)
+    if values.size == 0:
+        return None
+    top = int(np.argmax(values))
+    value = values[top]
+
+    def text(x):
+        return f"{x * 100:g} %" if percent else f"{x:g}"
+
+    if kind == "brdf":
+        if value > BRDF_MAX:
+            return top, (
+                f"BRDF {value:g} 1/sr exceeds {BRDF_MAX:g} 1/sr, more than any "
+                "gonio-spectrophotometer reports (a mirror seen through a 0.3° aperture); "
+                "check the units (BRDF in 1/sr)"
+            )
+        return None
+    if kind == "reflectance_factor":
+        if value > PERCENT_THRESHOLD:
+            return top, (
+                f"reflectance factor {text(value)} exceeds {text(PERCENT_THRESHOLD)}: this looks "
+                "like percent; divide by 100"
+            )
+        return None
+    if value > reflectance_max:
+        what = "transmittance" if kind == "specular_transmittance" else "reflectance"
+        if value > PERCENT_THRESHOLD and not percent:
+            return top, (
+                f"{what} {text(value)} exceeds {text(PERCENT_THRESHOLD)}: this looks like "
+                "percent; divide by 100"
+            )
+        verb = "transmits" if kind == "specular_transmittance" else "reflects"
+        return top, (
+            f"{what} {text(value)} exceeds {text(REFLECTANCE_MAX)}: no sample {verb} more light "
+            "than it receives (above 1 only by the calibration error of the white standard, a "
+            "few %); check the instrument's calibration"
+        )
+    return None
+
+
+def _control_character(text):
+    """The first control character (NUL, tab, CR, LF, ...; Unicode category Cc) of ``text``."""
+    return next((c for c in text if unicodedata.category(c) == "Cc"), None)
 
 
 def _error(message, field=None, sample=None, measurement=None):
@@ -294,12 +432,9 @@ class Measurement:
             raise _error(
                 f"values of {self.label} are negative (min {values.min():.4g})", field="values"
             )
-        if self.kind != "brdf" and (values > PERCENT_THRESHOLD).any():
-            raise _error(
-                f"values of {self.label} exceed {PERCENT_THRESHOLD} (max {values.max():.4g}): "
-                "this looks like percent; divide by 100",
-                field="values",
-            )
+        bad = value_problem(self.kind, values, reflectance_max=PERCENT_THRESHOLD)
+        if bad is not None:
+            raise _error(f"values of {self.label}: {bad[1]}", field="values")
         object.__setattr__(self, "label", expected["label"])
         object.__setattr__(self, "values", values)
 
@@ -420,11 +555,19 @@ class Sample:
 
     def __post_init__(self):
         name = self.name
-        if not isinstance(name, str) or not name.strip() or name != name.strip() or "\n" in name:
+        if not isinstance(name, str) or not name.strip() or name != name.strip():
             raise _error(
                 f"sample name must be non-empty text without surrounding blanks, got {name!r}",
                 field="sample",
                 sample=str(name),
+            )
+        control = _control_character(name)
+        if control:
+            raise _error(
+                f"sample name {name!r} contains the control character {control!r}, which no "
+                "measurement file can hold; rename the sample",
+                field="sample",
+                sample=name,
             )
         if self.role not in ROLES:
             raise _error(
@@ -466,10 +609,13 @@ class Sample:
                 self, attribute, _optional_positive(getattr(self, attribute), attribute, name)
             )
         if self.film_group is not None and (
-            not isinstance(self.film_group, str) or not self.film_group.strip()
+            not isinstance(self.film_group, str)
+            or not self.film_group.strip()
+            or _control_character(self.film_group)
         ):
             raise _error(
-                f"film_group must be non-empty text or None, got {self.film_group!r}",
+                "film_group must be non-empty text without control characters or None, got "
+                f"{self.film_group!r}",
                 field="film_group",
                 sample=name,
             )
@@ -711,11 +857,25 @@ class MeasurementSet:
         """Names of the samples, in order."""
         return tuple(s.name for s in self.samples)
 
+    def _index(self):
+        """Name -> sample (built once: the samples of a frozen set never change)."""
+        index = self.__dict__.get("_by_name")
+        if index is None:
+            index = {}
+            for sample in reversed(self.samples):
+                index[getattr(sample, "name", None)] = sample
+            object.__setattr__(self, "_by_name", index)
+        return index
+
+    def has_sample(self, name):
+        """True when a sample is called ``name`` (constant time)."""
+        return name in self._index()
+
     def sample(self, name):
         """The sample called ``name``."""
-        for sample in self.samples:
-            if sample.name == name:
-                return sample
+        index = self._index()
+        if name in index:
+            return index[name]
         raise KeyError(f"no sample {name!r}; samples: {', '.join(self.sample_names)}")
 
     @property
@@ -772,7 +932,7 @@ class MeasurementSet:
             return np.zeros(self.n_wavelengths)
         if isinstance(film.substrate, float):
             return np.full(self.n_wavelengths, film.substrate)
-        if film.substrate in self.sample_names:
+        if self.has_sample(film.substrate):
             return _albedo_from_air(self.sample(film.substrate), self.n)
         return np.full(self.n_wavelengths, _NAMED_SUBSTRATES[film.substrate])
 
@@ -826,7 +986,7 @@ class MeasurementSet:
             keep = {name for name in keep if self.sample(name).role in roles}
         for name in list(keep):
             substrate = self.sample(name).substrate
-            if isinstance(substrate, str) and substrate in self.sample_names:
+            if isinstance(substrate, str) and self.has_sample(substrate):
                 keep.add(substrate)
         return MeasurementSet(
             self.wavelength_nm,
@@ -884,14 +1044,10 @@ class MeasurementSet:
     # ---------------------------------------------------------------- output
     def to_csv(self, path):
         """Write the set as a bayespig CSV file (atomically); see ``docs/file-formats.md``."""
-        from .csv_format import write_csv
-
         write_csv(self, path)
 
     def to_astm_e1392(self, path, sample=None):
         """Write one sample's BRDFs as an ASTM E1392 text file (atomically)."""
-        from .astm_e1392 import write_astm_e1392
-
         write_astm_e1392(self, path, sample=sample)
 
     def summary(self):
@@ -912,8 +1068,10 @@ class MeasurementSet:
     __hash__ = None
 
     def __repr__(self):
+        names = list(self.sample_names[:REPR_SAMPLES])
+        shown = f"{names}"[:-1] + (", ...]" if len(self.samples) > REPR_SAMPLES else "]")
         return (
-            f"MeasurementSet({len(self.samples)} samples {list(self.sample_names)}, "
+            f"MeasurementSet({len(self.samples)} samples {shown}, "
             f"{self.n_wavelengths} wavelengths "
             f"{self.wavelength_nm[0]:g}–{self.wavelength_nm[-1]:g} nm)"
         )
@@ -1157,7 +1315,7 @@ def _describe_substrate(measurements, sample):
         return "-"
     if isinstance(sample.substrate, float):
         return f"r_s = {sample.substrate:g}"
-    if sample.substrate in measurements.sample_names:
+    if isinstance(sample.substrate, str) and measurements.has_sample(sample.substrate):
         try:
             r_s = measurements.substrate_albedo(sample)
             return f"sample {sample.substrate!r} (r_s {r_s.min():.3g}–{r_s.max():.3g})"

@@ -29,6 +29,7 @@ from .model import (
     Measurement,
     MeasurementSet,
     Sample,
+    wavelength_problem,
 )
 
 __all__ = ["DESIGNS", "FilmSpec", "simulate", "simulate_to_csv"]
@@ -212,6 +213,8 @@ def simulate(
     wavelength_nm = np.asarray(wavelengths, dtype=float)
     if wavelength_nm.ndim != 1 or wavelength_nm.size == 0:
         raise ValueError("wavelengths must be a non-empty 1-D array [nm]")
+    if np.isfinite(wavelength_nm).all() and (unit := wavelength_problem(wavelength_nm)):
+        raise ValueError(f"argument 'wavelengths': {unit[1]}")
     n_wl = wavelength_nm.size
     a = _spectrum("a", a, n_wl)
     tau = _spectrum("tau", tau, n_wl)

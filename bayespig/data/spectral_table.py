@@ -26,8 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from ._assemble import Row, assemble, parse_number
-from .csv_format import _lines
+from ._source import Source, load
 from .errors import MeasurementError, Problem
+from .model import value_problem, wavelength_problem
 
 __all__ = ["REVIGO_SUFFIXES", "looks_like_spectral_table", "read_revigo", "read_spectral_table"]
 
@@ -38,36 +39,92 @@ REVIGO_SUFFIXES = {
     "ob": ("film", "b"),
     "ow": ("film", "w"),
 }
+#: Accepted headers of the first column (the spectrum names), lower case.
+NAME_COLUMNS = ("name", "sample")
 _WAVELENGTH = re.compile(r"^\s*(\d+(?:\.\d*)?)\s*(?:nm)?\s*$", re.IGNORECASE)
 _REVIGO_NAME = re.compile(r"^(.+)_(b|w|ob|ow)$")
 _DATA_GLOB = "*spectral-data*.txt"
 _MIXTURE_GLOB = "*mixture-specifications*.txt"
 
 
-def looks_like_spectral_table(path):
-    """True when the first non-blank line is ``Name`` followed by wavelength columns."""
-    try:
-        with open(path, encoding="utf-8-sig", errors="replace") as handle:
-            for line in handle:
-                if line.strip():
-                    cells = re.split(r"[\t,;]", line.strip())
-                    return (
-                        cells[0].strip().lower() == "name"
-                        and len(cells) > 1
-                        and all(_WAVELENGTH.match(c) for c in cells[1:])
-                    )
-    except OSError:
-        return False
+def _delimiter(header_line):
+    return "\t" if "\t" in header_line else ("," if "," in header_line else ";")
+
+
+def _cells(line, delimiter):
+    """The stripped cells of a line, trailing empty cells (a tab at the end) removed."""
+    cells = [c.strip() for c in line.split(delimiter)]
+    while len(cells) > 1 and not cells[-1]:
+        cells.pop()
+    return cells
+
+
+def looks_like_spectral_table(source):
+    """True when the first non-blank line is a name column followed by wavelength columns.
+
+    Parameters
+    ----------
+    source : Source
+        The file, read once (:func:`bayespig.data._source.load`).
+    """
+    for line in source.head().splitlines():
+        if line.strip():
+            cells = _cells(line, _delimiter(line))
+            return (
+                len(cells) > 1
+                and not _WAVELENGTH.match(cells[0])
+                and all(_WAVELENGTH.match(c) for c in cells[1:])
+            )
     return False
 
 
-def read_spectral_table(path, *, units="percent"):
+def _parse_values(cells, header, name, row, problems):
+    """The numbers of a data row, or None after reporting its problems."""
+    try:
+        values = np.array(cells, dtype=float)
+        if np.isfinite(values).all() and (values >= 0).all():
+            return values
+    except ValueError:
+        pass
+    values, valid = [], True
+    for column, cell in zip(header, cells):
+        try:
+            value = parse_number(cell)
+        except ValueError as error:
+            problems.append(
+                Problem(str(error) if cell else "empty cell", file=name, row=row, field=column)
+            )
+            valid = False
+            continue
+        if not np.isfinite(value) or value < 0:
+            problems.append(
+                Problem(
+                    f"value {cell!r} must be a finite number >= 0",
+                    file=name,
+                    row=row,
+                    field=column,
+                )
+            )
+            valid = False
+        values.append(value)
+    return np.array(values) if valid else None
+
+
+def read_spectral_table(path, *, units="percent", progress=None):
     """Read a wide spectral table.
+
+    The first column holds the spectrum names (headed ``Name`` or ``Sample``),
+    every other column one wavelength [nm]; empty columns at the end of the
+    lines (a trailing tab) are ignored.
 
     Parameters
     ----------
     path : str or os.PathLike
     units : {"percent", "fraction"}
+    progress : None, bool or callable
+        Progress while reading: None shows a bar on stderr for files larger
+        than 20 MB; False nothing; a callable is called as ``progress(lines_read,
+        lines_total)``.
 
     Returns
     -------
@@ -84,21 +141,23 @@ def read_spectral_table(path, *, units="percent"):
     """
     if units not in ("percent", "fraction"):
         raise ValueError(f"units must be 'percent' or 'fraction', got {units!r}")
-    name = str(path)
-    lines = _lines(path)
+    source = load(path)
+    name = source.name
+    lines = source.take_lines("spectral_table")
     problems = []
     header_index = next((i for i, line in enumerate(lines) if line.strip()), None)
     if header_index is None:
         raise MeasurementError(Problem("the file is empty", file=name))
     header_line = lines[header_index]
-    delimiter = "\t" if "\t" in header_line else ("," if "," in header_line else ";")
-    header = [c.strip() for c in header_line.split(delimiter)]
-    if header[0].lower() != "name":
+    header_row = header_index + 1
+    delimiter = _delimiter(header_line)
+    header = _cells(header_line, delimiter)
+    if header[0].lower() not in NAME_COLUMNS:
         problems.append(
             Problem(
-                f"the first column must be 'Name', got {header[0]!r}",
+                f"the first column must be 'Name' (or 'Sample'), got {header[0]!r}",
                 file=name,
-                row=header_index + 1,
+                row=header_row,
                 field=header[0],
             )
         )
@@ -108,31 +167,34 @@ def read_spectral_table(path, *, units="percent"):
         if not match:
             problems.append(
                 Problem(
-                    f"column {cell!r} is not a wavelength in nm",
+                    f"column {cell!r} is not a wavelength in nm"
+                    if cell
+                    else "empty column header between wavelength columns",
                     file=name,
-                    row=header_index + 1,
+                    row=header_row,
                     field=cell,
                 )
             )
         else:
             wavelength_nm.append(float(match.group(1)))
     if not wavelength_nm:
-        problems.append(
-            Problem("no wavelength columns", file=name, row=header_index + 1, field="Name")
-        )
+        problems.append(Problem("no wavelength columns", file=name, row=header_row, field="Name"))
     elif any(b <= a for a, b in pairwise(wavelength_nm)):
-        problems.append(
-            Problem("wavelength columns must be increasing", file=name, row=header_index + 1)
-        )
+        problems.append(Problem("wavelength columns must be increasing", file=name, row=header_row))
+    elif unit := wavelength_problem(wavelength_nm):
+        problems.append(Problem(unit[1], file=name, row=header_row, field=header[1 + unit[0]]))
     if problems:
         raise MeasurementError(problems)
     scale = 0.01 if units == "percent" else 1.0
     spectra = {}
+    update = source.progress(progress, len(lines))
     for index in range(header_index + 1, len(lines)):
         line, row = lines[index], index + 1
+        lines[index] = None  # parsed: free it
+        update(index)
         if not line.strip():
             continue
-        cells = [c.strip() for c in line.split(delimiter)]
+        cells = _cells(line, delimiter)
         if len(cells) != len(header):
             problems.append(
                 Problem(
@@ -140,9 +202,9 @@ def read_spectral_table(path, *, units="percent"):
                 )
             )
             continue
-        spectrum, values, valid = cells[0], [], True
+        spectrum = cells[0]
         if not spectrum:
-            problems.append(Problem("empty name", file=name, row=row, field="Name"))
+            problems.append(Problem("empty name", file=name, row=row, field=header[0]))
             continue
         if spectrum in spectra:
             problems.append(
@@ -150,34 +212,16 @@ def read_spectral_table(path, *, units="percent"):
                     f"duplicated row: {spectrum!r} is already in row {spectra[spectrum][1]}",
                     file=name,
                     row=row,
-                    field="Name",
+                    field=header[0],
                 )
             )
             continue
-        for column, cell in zip(header[1:], cells[1:]):
-            try:
-                value = parse_number(cell)
-            except ValueError as error:
-                problems.append(
-                    Problem(str(error) if cell else "empty cell", file=name, row=row, field=column)
-                )
-                valid = False
-                continue
-            if not np.isfinite(value) or value < 0:
-                problems.append(
-                    Problem(
-                        f"value {cell!r} must be a finite number >= 0",
-                        file=name,
-                        row=row,
-                        field=column,
-                    )
-                )
-                valid = False
-            values.append(value * scale)
-        if valid:
-            spectra[spectrum] = (np.array(values), row)
+        values = _parse_values(cells[1:], header[1:], name, row, problems)
+        if values is not None:
+            spectra[spectrum] = (values * scale, row)
+    update.close()
     if not spectra and not problems:
-        problems.append(Problem("no spectra", file=name, row=header_index + 1))
+        problems.append(Problem("no spectra", file=name, row=header_row))
     if units == "percent" and spectra and max(v.max() for v, _ in spectra.values()) <= 0.015:
         problems.append(
             Problem(
@@ -185,17 +229,15 @@ def read_spectral_table(path, *, units="percent"):
                 file=name,
             )
         )
-    if units == "fraction":
-        for values, row in spectra.values():
-            if values.max() > 1.5:
-                problems.append(
-                    Problem(
-                        f"value {values.max():g} looks like percent; read with units='percent'",
-                        file=name,
-                        row=row,
-                        field=header[1 + int(np.argmax(values))],
-                    )
-                )
+    for values, row in spectra.values():
+        top = int(np.argmax(values))
+        if units == "fraction" and values[top] > 1.5:
+            message = f"value {values[top]:g} looks like percent; read with units='percent'"
+        elif bad := value_problem("hemispherical", values, percent=units == "percent"):
+            message = bad[1]
+        else:
+            continue
+        problems.append(Problem(message, file=name, row=row, field=header[1 + top]))
     if problems:
         raise MeasurementError(problems)
     return np.array(wavelength_nm), spectra
@@ -204,7 +246,7 @@ def read_spectral_table(path, *, units="percent"):
 def _read_mixtures(path):
     """Revigo ``<id>\\t<pigment>-<pigment>|<ratio>-<ratio>`` lines -> id -> composition dict."""
     compositions = {}
-    for row, line in enumerate(_lines(path), start=1):
+    for row, line in enumerate(load(path).lines("spectral_table"), start=1):
         if not line.strip():
             continue
         film_id, _, spec = line.partition("\t")
@@ -241,7 +283,7 @@ def _find(folder, pattern, what):
     return found[0]
 
 
-def read_revigo(path, *, specular="excluded", theta_i=8.0, units="percent", n=1.45):
+def read_revigo(path, *, specular="excluded", theta_i=8.0, units="percent", n=1.45, progress=None):
     """Read a Revigo-style table into one measurement set per film id.
 
     Parameters
@@ -258,6 +300,8 @@ def read_revigo(path, *, specular="excluded", theta_i=8.0, units="percent", n=1.
     units : {"percent", "fraction"}
     n : float
         Binder refractive index [-].
+    progress : None, bool or callable
+        See :func:`read_spectral_table`.
 
     Returns
     -------
@@ -276,16 +320,17 @@ def read_revigo(path, *, specular="excluded", theta_i=8.0, units="percent", n=1.
     """
     if specular not in ("excluded", "included"):
         raise ValueError(f"specular must be 'excluded' or 'included', got {specular!r}")
-    path = Path(path)
-    if path.is_dir():
+    if not isinstance(path, Source) and Path(path).is_dir():
         table = _find(path, _DATA_GLOB, "spectral data")
-        mixtures = sorted(path.glob(_MIXTURE_GLOB))
+        mixtures = sorted(Path(path).glob(_MIXTURE_GLOB))
     else:
         table = path
-        mixtures = sorted(path.parent.glob(_MIXTURE_GLOB))
+        table_name = path.name if isinstance(path, Source) else str(path)
+        mixtures = sorted(Path(table_name).parent.glob(_MIXTURE_GLOB))
     compositions = _read_mixtures(mixtures[0]) if len(mixtures) == 1 else {}
-    wavelength_nm, spectra = read_spectral_table(table, units=units)
-    file = str(table)
+    table = load(table)
+    wavelength_nm, spectra = read_spectral_table(table, units=units, progress=progress)
+    file = table.name
     problems, by_id = [], {}
     for spectrum, (values, row) in spectra.items():
         match = _REVIGO_NAME.match(spectrum)
@@ -317,6 +362,7 @@ def read_revigo(path, *, specular="excluded", theta_i=8.0, units="percent", n=1.
         raise MeasurementError(problems)
     geometry = f"{theta_i:g}d-{'sci' if specular == 'included' else 'sce'}"
     sets = {}
+    wavelength_fields = [f"{w:g}" for w in wavelength_nm]
     for film_id, parts in by_id.items():
         rows = []
         for suffix, (role, substrate) in REVIGO_SUFFIXES.items():
@@ -334,7 +380,7 @@ def read_revigo(path, *, specular="excluded", theta_i=8.0, units="percent", n=1.
                     values,
                     attributes,
                     {"role": "Name", "substrate": "Name", "film_group": "Name"},
-                    [f"{w:g}" for w in wavelength_nm],
+                    wavelength_fields,
                 )
             )
         metadata = {

@@ -268,9 +268,16 @@ def test_nothing_written_on_error(tmp_path):
     ms = read_csv(write(tmp_path, VALID))
     target = tmp_path / "out.csv"
     target.write_text("previous content")
-    bad = MeasurementSet(ms.wavelength_nm, ms.samples, metadata={"bad key": 1})
-    with pytest.raises(ValueError, match="cannot be written"):
-        bad.to_csv(target)
+    # Sample refuses such a name; the writer checks again, before writing anything, for
+    # objects changed after construction.
+    sample = ms.samples[-1]
+    object.__setattr__(sample, "name", "on\x00white")
+    with pytest.raises(
+        ValueError,
+        match=r"^sample name 'on\\x00white' contains the control character '\\x00', which a "
+        "text file cannot hold; rename it$",
+    ):
+        ms.to_csv(target)
     assert target.read_text() == "previous content"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["measurements.csv", "out.csv"]
 

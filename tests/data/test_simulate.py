@@ -63,7 +63,7 @@ def test_designs_serve_their_method(design, methods):
 
 def test_noise_is_eq7_and_seeded():
     """x_obs / x_true - 1 = eps * xi with xi standard normal (paper eq. 7)."""
-    wavelengths = np.arange(N_NOISE // 6, dtype=float) + 1.0
+    wavelengths = 200.0 + np.arange(N_NOISE // 6) * (3000.0 / (N_NOISE // 6))
     kwargs = dict(a=0.2, tau=1.0, design="method3", wavelengths=wavelengths, model=_fake_model)
     truth = simulate(eps=0.0, **kwargs).sample("on_black").reflectance
     eps = 0.05

@@ -1,6 +1,7 @@
 """Wide spectral tables; the 84 Revigo films over black and white with their cards."""
 
 import csv
+import os
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,11 @@ from bayespig.data import (
     read_spectral_table,
 )
 
-REVIGO = Path(__file__).resolve().parents[3] / "shared" / "data" / "revigo"
+REVIGO = Path(
+    os.environ.get(
+        "BAYESPIG_REVIGO", Path(__file__).resolve().parents[3] / "shared" / "data" / "revigo"
+    )
+)
 REVIGO_TABLE = REVIGO / "revigo-aggregated-palette-spectral-data.txt"
 needs_revigo = pytest.mark.skipif(
     not REVIGO_TABLE.exists(), reason=f"Revigo data not found at {REVIGO}"
