@@ -14,12 +14,14 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Mapping
+import numbers
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..instruments import get_instrument, predict
+from ..likelihood import method_name
 from ..physics.forward import specular_transmittance
 from ..physics.substrate import clear_binder_brdf, clear_binder_reflectance
 from .model import (
@@ -101,12 +103,19 @@ def _spectrum(name, value, n_wavelengths):
 
 
 def _film_specs(design):
-    if isinstance(design, str):
-        if design not in DESIGNS:
+    if isinstance(design, (str, numbers.Integral)) and not isinstance(design, bool):
+        try:  # 4, "4" and "method4" alike, as everywhere
+            return DESIGNS[method_name(design, also=(), argument="design")]
+        except ValueError:
             raise ValueError(
-                f"design must be one of {', '.join(METHODS)} or a list of FilmSpec, got {design!r}"
-            )
-        return DESIGNS[design]
+                f"design must be one of {', '.join(METHODS)} (or their numbers 1-4) or a list of "
+                f"FilmSpec, got {design!r}"
+            ) from None
+    if isinstance(design, (bool, Mapping, FilmSpec)) or not isinstance(design, Iterable):
+        raise TypeError(
+            f"design must be a method ({', '.join(METHODS)}, or 1-4) or a list of FilmSpec or "
+            f"dict, got {type(design).__name__} {design!r}"
+        )
     specs = []
     for k, item in enumerate(design):
         if isinstance(item, FilmSpec):
@@ -313,7 +322,8 @@ def simulate(
 
     metadata = {
         "generator": "bayespig.simulate",
-        "design": design if isinstance(design, str) else [dataclasses.asdict(s) for s in specs],
+        "design": (method_name(design, also=(), argument="design") if isinstance(design, (str, numbers.Integral))
+                   else [dataclasses.asdict(s) for s in specs]),
         "instrument": instrument.name
         if isinstance(instrument.name, str) and instrument.name != "custom"
         else list(instrument.labels),

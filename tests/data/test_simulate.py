@@ -166,6 +166,22 @@ def test_bad_arguments(kwargs, match):
         simulate(wavelengths=WAVELENGTHS, model=_fake_model, instrument="multi-angle-45", **kwargs)
 
 
+@pytest.mark.parametrize("design", [None, True, 4.0, {"substrate": "black"}])
+def test_a_design_of_the_wrong_type_is_a_type_error_naming_it(design):
+    with pytest.raises(TypeError, match=r"^design must be a method \(method1, method2, method3, method4, or 1-4\) "
+                                        r"or a list of FilmSpec or dict, got "):
+        simulate(a=0.1, tau=1.0, design=design, wavelengths=WAVELENGTHS, model=_fake_model,
+                 instrument="multi-angle-45")
+
+
+@pytest.mark.parametrize("design", [4, "4", "method4"])
+def test_a_design_is_a_method_in_either_spelling(design):
+    films = simulate(a=0.1, tau=1.0, design=design, wavelengths=WAVELENGTHS, model=_fake_model,
+                     instrument="multi-angle-45", seed=1)
+    assert films == simulate(a=0.1, tau=1.0, design="method4", wavelengths=WAVELENGTHS,
+                             model=_fake_model, instrument="multi-angle-45", seed=1)
+
+
 def test_simulate_to_csv_writes_what_it_returns(tmp_path):
     path = tmp_path / "sim.csv"
     ms = simulate_to_csv(
