@@ -5,6 +5,7 @@ with :func:`os.replace` once complete. Temporary names say whose they are::
 
     .<name>.bayespig-tmp-<host>-<pid>-<random><suffix>      (one file, :func:`atomic_path`)
     .staging.bayespig-tmp-<host>-<pid>-<random>             (a file set, :func:`write_file_set`)
+    .<folder>.bayespig-tmp-<host>-<pid>-<random>            (a whole folder, :func:`write_folder_atomically`)
 
 A process that is killed outright (``SIGKILL``, power loss) cannot remove its temporary file,
 so at most one such file per interrupted write is left behind; the next atomic write into the
@@ -23,7 +24,13 @@ import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_path", "remove_stale_temporaries", "write_file_set", "write_text_atomically"]
+__all__ = [
+    "atomic_path",
+    "remove_stale_temporaries",
+    "write_file_set",
+    "write_folder_atomically",
+    "write_text_atomically",
+]
 
 #: Marker in the name of every temporary file or folder written by this module.
 TEMPORARY_MARKER = "bayespig-tmp"
@@ -171,15 +178,7 @@ def write_file_set(out_dir, files):
     remove_stale_temporaries(out_dir)
     staging = Path(tempfile.mkdtemp(prefix=_temporary_prefix("staging"), dir=out_dir))
     try:
-        for relative, content in files.items():
-            target = staging / relative
-            target.parent.mkdir(parents=True, exist_ok=True)
-            if callable(content):
-                content(target)
-            elif isinstance(content, bytes):
-                target.write_bytes(content)
-            else:
-                target.write_text(content, encoding="utf-8")
+        _write_contents(staging, files)
         written = {}
         for relative in files:
             final = out_dir / relative
@@ -190,3 +189,73 @@ def write_file_set(out_dir, files):
         return written
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+
+
+def _write_contents(folder, files):
+    """Write ``files`` (relative path -> bytes, UTF-8 text or a callable writing the path it is
+    given) below ``folder``, creating subfolders."""
+    for relative, content in files.items():
+        target = Path(folder) / relative
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if callable(content):
+            content(target)
+        elif isinstance(content, bytes):
+            target.write_bytes(content)
+        else:
+            target.write_text(content, encoding="utf-8")
+
+
+def _swap_into_place(staging, out_dir):
+    """Move the complete folder ``staging`` to ``out_dir``, replacing what is there whole.
+
+    Two renames in the same parent folder; if the second fails the old folder is put back.
+    """
+    if not (out_dir.exists() or out_dir.is_symlink()):
+        os.rename(staging, out_dir)
+        return
+    old = Path(tempfile.mkdtemp(prefix=_temporary_prefix(out_dir.name), suffix=".old", dir=out_dir.parent))
+    os.rmdir(old)
+    os.rename(out_dir, old)
+    try:
+        os.rename(staging, out_dir)
+    except BaseException:
+        os.rename(old, out_dir)
+        raise
+    if old.is_symlink() or not old.is_dir():
+        old.unlink()
+    else:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def write_folder_atomically(out_dir, files):
+    """Write a whole folder: ``out_dir`` ends up holding exactly ``files``, or is left as it was.
+
+    The files are written into a hidden temporary folder beside ``out_dir`` (named as the module
+    docstring says, so a killed run's leftover is removed by the next write), which then
+    replaces ``out_dir`` whole: nothing of an earlier content (stale figures) survives.
+
+    Parameters
+    ----------
+    out_dir : str or os.PathLike
+        The folder to write (its parent is created if missing).
+    files : dict
+        Relative path -> content, as for :func:`write_file_set`.
+
+    Returns
+    -------
+    pathlib.Path
+        ``out_dir``.
+    """
+    out_dir = Path(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(out_dir.parent)
+    staging = Path(tempfile.mkdtemp(prefix=_temporary_prefix(out_dir.name), suffix=".tmp", dir=out_dir.parent))
+    try:
+        _write_contents(staging, files)
+        for folder in [staging, *(p for p in staging.rglob("*") if p.is_dir())]:
+            os.chmod(folder, 0o777 & ~_umask())
+        _swap_into_place(staging, out_dir)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return out_dir

@@ -15,6 +15,7 @@ from bayespig._atomic import (
     atomic_path,
     remove_stale_temporaries,
     write_file_set,
+    write_folder_atomically,
     write_text_atomically,
 )
 
@@ -76,6 +77,30 @@ def test_write_file_set_cleans_too(tmp_path):
     stale.write_text("partial")
     write_file_set(tmp_path, {"a.txt": "a", "b/c.txt": "c"})
     assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*")) == ["a.txt", "b", "b/c.txt"]
+
+
+def test_write_folder_replaces_the_folder_whole_and_cleans_a_killed_runs_staging(tmp_path):
+    out = tmp_path / "report"
+    (out / "figures").mkdir(parents=True)
+    (out / "figures" / "stale.png").write_bytes(b"old")
+    killed = tmp_path / _temporary_name("report", _dead_pid())
+    (killed / "figures").mkdir(parents=True)  # a staging folder left by SIGKILL
+    write_folder_atomically(out, {"report.md": "new", "figures/fit.png": b"png"})
+    assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*")) == [
+        "report", "report/figures", "report/figures/fit.png", "report/report.md"]
+
+
+def test_write_folder_leaves_the_old_folder_on_an_error(tmp_path):
+    out = tmp_path / "report"
+    out.mkdir()
+    (out / "report.md").write_text("old")
+
+    def fail(path):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        write_folder_atomically(out, {"report.md": "new", "posterior.nc": fail})
+    assert [p.name for p in tmp_path.iterdir()] == ["report"] and (out / "report.md").read_text() == "old"
 
 
 def test_remove_stale_temporaries_reports_what_it_removed(tmp_path):

@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import colorimetry
-from .._atomic import _umask
+from .._atomic import write_folder_atomically
 from .._json import jsonable as _jsonable
 from . import document as doc
 from . import figures as figs
@@ -814,24 +814,7 @@ def _write_files(out_dir, content, idata, extra_files):
     contents["summary.json"] = json.dumps(summary, indent=1, allow_nan=False, default=str) + "\n"
     contents["report.md"] = doc.to_markdown(content["blocks"])
     contents["report.html"] = doc.to_html(content["blocks"], content["figures"], content["title"])
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))
-    try:
-        for relative, value in contents.items():
-            target = staging / relative
-            target.parent.mkdir(parents=True, exist_ok=True)
-            if callable(value):
-                value(target)
-            elif isinstance(value, bytes):
-                target.write_bytes(value)
-            else:
-                target.write_text(value, encoding="utf-8")
-        for folder in [staging, *(p for p in staging.rglob("*") if p.is_dir())]:
-            os.chmod(folder, 0o777 & ~_umask())
-        _swap_into_place(staging, out_dir)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
+    write_folder_atomically(out_dir, contents)
     content["summary"]["files"] = summary["files"]
     files = {"figures": [out_dir / f"figures/{name}.png" for name in content["figures"]]}
     for role, name in (("netcdf", "posterior.nc"), ("csv", "summary.csv"), ("json", "summary.json"),
@@ -839,28 +822,6 @@ def _write_files(out_dir, content, idata, extra_files):
         if name in contents:
             files[role] = out_dir / name
     return files
-
-
-def _swap_into_place(staging, out_dir):
-    """Move the complete folder ``staging`` to ``out_dir``, replacing what is there whole.
-
-    Two renames in the same parent folder; if the second fails the old folder is put back.
-    """
-    if not (out_dir.exists() or out_dir.is_symlink()):
-        os.rename(staging, out_dir)
-        return
-    old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".old", dir=out_dir.parent))
-    os.rmdir(old)
-    os.rename(out_dir, old)
-    try:
-        os.rename(staging, out_dir)
-    except BaseException:
-        os.rename(old, out_dir)
-        raise
-    if old.is_symlink() or not old.is_dir():
-        old.unlink()
-    else:
-        shutil.rmtree(old, ignore_errors=True)
 
 
 def _is_report_folder(folder, entries):
