@@ -91,7 +91,7 @@ def run_compare(args):
     if args.paper_points:
         a0 = np.array([p[0] for p in compare.PAPER_POINTS])
         tau0 = np.array([p[1] for p in compare.PAPER_POINTS])
-        paper = compare.compare_methods(a0, tau0, wavelengths=np.arange(1.0, 10.0), **common)
+        paper = compare.compare_methods(a0, tau0, **common)  # one label wavelength (400 + 10 k nm) per point
     if args.map:
         maps = compare.method_map(methods, instrument=args.instrument, eps=args.eps)
     if comparison is None and paper is None and maps is None:

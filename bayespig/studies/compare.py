@@ -204,7 +204,7 @@ class ComparisonResult:
     Attributes
     ----------
     wavelength_nm : numpy.ndarray
-        Shape (W,) [nm] (for the paper's points: 0..8, one per point).
+        Shape (W,) [nm] (for the paper's points: label wavelengths 400 + 10 k nm, one per point).
     a, tau : numpy.ndarray
         True values, shape (W,).
     names : list of str
