@@ -31,6 +31,7 @@ from .model import (
     Measurement,
     MeasurementSet,
     Sample,
+    value_problem,
     wavelength_problem,
 )
 
@@ -348,5 +349,16 @@ def simulate_to_csv(path, **kwargs):
         What was written.
     """
     measurements = simulate(**kwargs)
+    for sample in measurements.samples:  # what the readers would refuse is not written
+        for measurement in sample.measurements:
+            problem = value_problem(measurement.kind, measurement.values)
+            if problem is not None:
+                index, message = problem
+                raise ValueError(
+                    f"the simulated set cannot be written as a measurement file: sample "
+                    f"{sample.name!r}, geometry {measurement.label}, "
+                    f"{measurements.wavelength_nm[index]:g} nm: {message} (the noise, eps, "
+                    "took it there; a reader would refuse it)"
+                )
     measurements.to_csv(path)
     return measurements

@@ -193,3 +193,13 @@ def test_simulate_to_csv_writes_what_it_returns(tmp_path):
             tmp_path / "bad.csv", a=0.1, tau=-1.0, design="method4", wavelengths=WAVELENGTHS
         )
     assert not (tmp_path / "bad.csv").exists()
+
+
+def test_simulate_to_csv_writes_nothing_a_reader_would_refuse(tmp_path):
+    """A white film (reflectance ~0.9) with 15 % noise passes 1.05 somewhere: refused before writing."""
+    path = tmp_path / "bright.csv"
+    with pytest.raises(ValueError, match=r"^the simulated set cannot be written as a measurement file: sample "
+                                         r"'.*', geometry 8d-sci, .* nm: reflectance .* exceeds 1.05"):
+        simulate_to_csv(path, a=1e-4, tau=1.0, design=[{"name": "white", "opaque": True}], eps=0.15,
+                        instrument="8d-sci", wavelengths=[400.0 + 10 * k for k in range(20)], seed=0)
+    assert not path.exists()
