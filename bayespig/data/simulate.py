@@ -129,7 +129,7 @@ def _film_specs(design):
             except TypeError as error:
                 raise ValueError(f"design[{k}]: {error}") from None
         else:
-            raise ValueError(f"design[{k}] must be a FilmSpec or a dict, got {type(item).__name__}")
+            raise TypeError(f"design[{k}] must be a FilmSpec or a dict, got {type(item).__name__}")
     if not specs:
         raise ValueError("design needs at least one film")
     return tuple(specs)
