@@ -56,7 +56,18 @@ def read_all(path, *, resample=False):
     return _read(source, file_format(source), resample)
 
 
-def read_measurements(path, *, film=None, resample=False):
+def _film_options(opaque, substrate):
+    """``opaque``/``substrate`` arguments checked, as keyword arguments of the E1392 reader."""
+    if opaque is not None and not isinstance(opaque, bool):
+        raise TypeError(f"opaque must be True, False or None, got {opaque!r}")
+    if substrate is not None and (isinstance(substrate, bool) or not isinstance(substrate, (str, int, float))):
+        raise TypeError(
+            f"substrate must be 'black', 'white', an albedo in [0, 1], a sample name or None, got {substrate!r}"
+        )
+    return {"opaque": opaque, "substrate": substrate}
+
+
+def read_measurements(path, *, film=None, resample=False, opaque=None, substrate=None):
     """Read a measurement file of any supported format.
 
     Parameters
@@ -70,6 +81,14 @@ def read_measurements(path, *, film=None, resample=False):
     resample : bool
         Interpolate rows measured at different wavelengths onto the wavelengths
         they share (with a warning) instead of raising.
+    opaque : bool, optional
+        ASTM E1392 files only (the standard has no keyword for it): True when the
+        film hides its substrate, False when it does not (then it needs a
+        substrate). Wins over an ``OPAQUE`` keyword in the file.
+    substrate : str or float, optional
+        ASTM E1392 files only: the film's substrate, ``"black"`` (r_s = 0.01),
+        ``"white"`` (0.95), an albedo in [0, 1] or the name of a substrate sample
+        in another of the files. Wins over a ``SUBSTRATE`` keyword in the file.
 
     Returns
     -------
@@ -79,13 +98,27 @@ def read_measurements(path, *, film=None, resample=False):
     ------
     MeasurementError
         Every problem found, each naming the file, row and field.
+    ValueError
+        ``opaque`` or ``substrate`` given for a CSV file or a spectral table
+        (they state it per sample).
+    TypeError
+        ``opaque`` or ``substrate`` of the wrong type.
     """
+    options = _film_options(opaque, substrate)
+    given = [k for k, v in options.items() if v is not None]
     if isinstance(path, MeasurementSet):
+        if given:
+            raise ValueError(f"{given[0]}= applies when reading an ASTM E1392 file, not to a MeasurementSet")
         return path
     if not isinstance(path, (str, os.PathLike, Source, Path)):
-        return read_astm_e1392(list(path), resample=resample)
+        return read_astm_e1392(list(path), resample=resample, **options)
     path = _open(path)
     kind = file_format(path)
+    if given and kind != "astm_e1392":
+        raise ValueError(
+            f"{given[0]}= applies to ASTM E1392 files, whose header has no standard keyword for it; "
+            f"a {kind.replace('_', ' ')} file states it per sample (its {given[0]} column)"
+        )
     if kind == "spectral_table":
         sets = read_revigo(path)
         if film is None and len(sets) == 1:
@@ -104,7 +137,7 @@ def read_measurements(path, *, film=None, resample=False):
             )
         return sets[film]
     if kind == "astm_e1392":
-        return read_astm_e1392(path, resample=resample)
+        return read_astm_e1392(path, resample=resample, **options)
     return read_csv(path, resample=resample)
 
 
