@@ -276,11 +276,11 @@ def substrate_argument(text):
         value = float(text)
     except ValueError:
         if not text.strip():
-            raise ValueError("--substrate: expected 'black', 'white', an albedo in [0, 1] or a sample name, "
-                             "got ''") from None
+            raise argparse.ArgumentTypeError("expected 'black', 'white', an albedo in [0, 1] or a sample "
+                                             "name, got ''") from None
         return text.strip()
     if not 0.0 <= value <= 1.0:
-        raise ValueError(f"--substrate: an albedo must be in [0, 1], got {text!r}")
+        raise argparse.ArgumentTypeError(f"an albedo must be in [0, 1], got {text!r}")
     return value
 
 

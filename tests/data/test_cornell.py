@@ -147,3 +147,47 @@ def test_cornell_infer_runs_with_a_floor(tmp_path, capsys):
                  "--wavelengths", "600-620", "--max-angle", "30", "--out", str(out), "--no-progress"]) == 0
     assert (out / "posterior.nc").exists() and (out / "summary.csv").exists()
     assert capsys.readouterr().out.startswith("bayespig infer: general, g isotropic")
+
+
+def test_report_film_state_options_refused_for_a_posterior(tmp_path, capsys):
+    posterior = tmp_path / "posterior.nc"
+    posterior.write_bytes(b"not read")
+    assert main(["report", str(posterior), "--opaque", "--out", str(tmp_path / "out")]) == 2
+    assert capsys.readouterr().err == (f"bayespig: error: --opaque/--substrate: {posterior} is a posterior; they "
+                                       "apply when report infers from an ASTM E1392 file\n")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("value, message", [
+    ("1.5", "an albedo must be in [0, 1], got '1.5'"),
+    ("", "expected 'black', 'white', an albedo in [0, 1] or a sample name, got ''"),
+])
+def test_bad_substrate_argument(tmp_path, capsys, value, message):
+    path = _write(tmp_path)
+    with pytest.raises(SystemExit) as info:
+        main(["check", str(path), "--substrate", value])
+    assert info.value.code == 2
+    assert capsys.readouterr().err.endswith(f"bayespig check: error: argument --substrate: {message}\n")
+
+
+def test_opaque_and_substrate_exclusive(tmp_path, capsys):
+    path = _write(tmp_path)
+    with pytest.raises(SystemExit) as info:
+        main(["check", str(path), "--opaque", "--substrate", "black"])
+    assert info.value.code == 2
+    assert "argument --substrate: not allowed with argument --opaque" in capsys.readouterr().err
+
+
+def test_check_verbose_lists_every_geometry(tmp_path, capsys, monkeypatch):
+    import bayespig.data.io as io
+
+    monkeypatch.setattr(io, "GEOMETRY_LIST_MAX", 2)  # the 3 rows count as many
+    path = _write(tmp_path)
+    main(["check", str(path), "--opaque"])
+    short = capsys.readouterr().out
+    assert ("brdf at 3 geometries: theta_i 30° (1), 45° (2); theta_o 30°–60°; delta_phi 90°–180°; 2 in the "
+            "plane of incidence, 1 out of it (--verbose lists them)") in short
+    main(["check", str(path), "--opaque", "--verbose"])
+    lines = capsys.readouterr().out.splitlines()
+    assert [line for line in lines if line.startswith("    brdf ")] == [
+        "    brdf 45as15", "    brdf 45as-0.3", "    brdf 30/60/90"]
