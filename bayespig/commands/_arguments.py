@@ -13,10 +13,28 @@ import numpy as np
 from ..instruments import BUILT_IN_INSTRUMENTS, get_instrument
 from ..likelihood import method_name
 
-__all__ = ["INFER_METHODS", "INPUT_KINDS", "METHOD_HELP", "add_film_argument", "add_input_argument", "add_output_argument",
-           "add_film_state_arguments", "add_substrate_argument", "film_state", "add_verbosity_arguments", "check_input_path", "check_output_path",
-           "instrument_argument", "instrument_help", "method_argument", "paper_method_argument",
-           "parse_methods", "parse_numbers", "read_film", "substrate_argument"]
+__all__ = [
+    "INFER_METHODS",
+    "INPUT_KINDS",
+    "METHOD_HELP",
+    "add_film_argument",
+    "add_film_state_arguments",
+    "add_input_argument",
+    "add_output_argument",
+    "add_substrate_argument",
+    "add_verbosity_arguments",
+    "check_input_path",
+    "check_output_path",
+    "film_state",
+    "instrument_argument",
+    "instrument_help",
+    "method_argument",
+    "paper_method_argument",
+    "parse_methods",
+    "parse_numbers",
+    "read_film",
+    "substrate_argument",
+]
 
 #: What ``--method`` accepts, for the help texts.
 METHOD_HELP = "1, 2, 3, 4 (or method1 .. method4)"

@@ -13,12 +13,12 @@ from ._arguments import INFER_METHODS as _METHODS
 from ._arguments import (
     METHOD_HELP,
     add_film_argument,
+    add_film_state_arguments,
     add_input_argument,
     add_output_argument,
-    add_film_state_arguments,
     add_substrate_argument,
-    film_state,
     add_verbosity_arguments,
+    film_state,
     method_argument,
     read_film,
 )

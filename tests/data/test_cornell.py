@@ -179,7 +179,7 @@ def test_opaque_and_substrate_exclusive(tmp_path, capsys):
 
 
 def test_check_verbose_lists_every_geometry(tmp_path, capsys, monkeypatch):
-    import bayespig.data.io as io
+    from bayespig.data import io
 
     monkeypatch.setattr(io, "GEOMETRY_LIST_MAX", 2)  # the 3 rows count as many
     path = _write(tmp_path)
