@@ -19,10 +19,14 @@ difference, 180° on the specular side and 0° back towards the source
 (DESIGN.md), is therefore ``delta_phi = |phi_s - phi_i|`` folded into [0°, 180°].
 Angles are rounded to 1e-4° when read. Values are BRDF in 1/sr.
 
-One file holds one sample. Besides the standard's free-form keywords (kept as
+One file holds one sample, named by the standard's ``SAMPLE_NAME`` (else ``NAME``,
+else the file name). Besides the standard's free-form keywords (kept as
 metadata), bayespig reads and writes ``NAME``, ``ROLE``, ``SUBSTRATE``,
 ``FILM_GROUP``, ``OPAQUE``, ``THICKNESS_UM``, ``CONCENTRATION``, ``EPS``, ``N``
-(binder refractive index) and ``BAYESPIG_METADATA`` (JSON). Several files (the
+(binder refractive index) and ``BAYESPIG_METADATA`` (JSON). The standard has no
+keyword for ``OPAQUE``/``SUBSTRATE``: a film whose header gives neither is refused
+unless the reader is told (``opaque=``/``substrate=``, which win over the file).
+Several files (the
 same film over black and over white, a substrate card) read together form one
 measurement set.
 """
