@@ -23,11 +23,13 @@ import numpy as np
 
 from . import __version__
 from .commands._arguments import (
+    add_film_state_arguments,
     add_input_argument,
     add_output_argument,
     add_verbosity_arguments,
     check_input_path,
     check_output_path,
+    film_state,
     instrument_argument,
     instrument_help,
     paper_method_argument,
@@ -41,6 +43,8 @@ INTERRUPTED_MESSAGE = "bayespig: interrupted; nothing written"
 EXIT_INTERRUPTED = 130
 #: Exit status when stdout is closed by its reader (128 + SIGPIPE, as the shell's own tools).
 EXIT_BROKEN_PIPE = 141
+#: Exit status of ``bayespig check`` for a readable file that ``infer`` refuses as it stands.
+EXIT_NOT_INFERABLE = 1
 #: Exit status of a user's mistake (bad argument, unreadable file), as argparse uses.
 EXIT_USAGE = 2
 
@@ -125,11 +129,95 @@ def _table_info(args):
     return 0
 
 
+#: ``bayespig check`` reports BRDF rows viewed within this angle of the mirror direction [deg]:
+#: there the surface's own gloss dominates (--exclude-mirror drops them).
+NEAR_MIRROR_DEG = 5.0
+#: ``bayespig check`` calls BRDF values above this implausible for a paint's body [1/sr]: a
+#: perfectly white Lambertian surface gives 1/pi = 0.32 1/sr, so 10 1/sr is 30x that, gloss.
+GLOSS_BRDF_PER_SR = 10.0
+#: Rows listed at most per finding of ``bayespig check`` (without --verbose).
+CHECK_ROWS_SHOWN = 8
+
+
+def _rows_text(sources, verbose):
+    """``row 12, 15, ...`` of (file, line) sources (their file is the one checked)."""
+    rows = sorted({source[1] for source in sources if source is not None})
+    if not rows:
+        return ""
+    shown = rows if verbose or len(rows) <= CHECK_ROWS_SHOWN else rows[:CHECK_ROWS_SHOWN]
+    more = "" if len(shown) == len(rows) else f", ... ({len(rows) - len(shown)} more)"
+    return f"row{'s' if len(rows) > 1 else ''} {', '.join(map(str, shown))}{more}"
+
+
+def _check_notes(measurements, verbose=False):
+    """What ``bayespig check`` adds to a set's summary: whether infer takes it, and its findings.
+
+    Returns
+    -------
+    (bool, list of str)
+        True when :func:`bayespig.infer` accepts the set as it stands (the same validation:
+        :meth:`~bayespig.likelihood.Problem.from_measurements` and
+        :func:`~bayespig.likelihood.check_observed`, without a noise floor); the lines.
+    """
+    from .likelihood import Problem, check_observed
+    from .selection import mirror_distance_deg
+
+    wavelength = np.asarray(measurements.wavelength_nm, dtype=float)
+    lines = []
+    brdf = [m for s in measurements.samples for m in s.measurements if m.kind == "brdf"]
+    if brdf:
+        distance = mirror_distance_deg(np.array([m.theta_i for m in brdf]),
+                                       np.array([m.theta_o for m in brdf]),
+                                       np.array([m.delta_phi for m in brdf]))
+        near = np.flatnonzero(distance < NEAR_MIRROR_DEG)
+        if near.size:
+            closest = int(near[np.argmin(distance[near])])
+            lines.append(f"  {near.size} BRDF geometr{'ies' if near.size > 1 else 'y'} within "
+                         f"{NEAR_MIRROR_DEG:g}° of the mirror direction (closest {distance[closest]:.2g}°, "
+                         f"{brdf[closest].label}): the surface's gloss dominates there; "
+                         f"--exclude-mirror {NEAR_MIRROR_DEG:g} leaves them out "
+                         f"({_rows_text([brdf[k].source for k in near], verbose)})")
+        values = np.array([m.values for m in brdf])
+        high = np.argwhere(values > GLOSS_BRDF_PER_SR)
+        if high.size:
+            k, band = np.unravel_index(int(np.argmax(values)), values.shape)
+            lines.append(f"  {len(high)} BRDF value{'s' if len(high) > 1 else ''} above "
+                         f"{GLOSS_BRDF_PER_SR:g} 1/sr, implausible for a paint's body (a white "
+                         f"Lambertian surface gives 0.32 1/sr): gloss; the largest {values[k, band]:.3g} "
+                         f"1/sr at {wavelength[band]:g} nm, {brdf[k].label} "
+                         f"({_rows_text([brdf[i].source for i in np.unique(high[:, 0])], verbose)})")
+    reflectance = [m for s in measurements.samples for m in s.measurements]
+    zeros = np.array([m.values == 0 for m in reflectance])
+    if zeros.any():
+        per_band = zeros.sum(axis=0)
+        bands = ", ".join(f"{w:g} nm {c}" for w, c in zip(wavelength, per_band) if c)
+        rows = [reflectance[k].source for k in np.flatnonzero(zeros.any(axis=1))]
+        lines.append(f"  {int(zeros.sum())} exact zero{'s' if zeros.sum() > 1 else ''} in "
+                     f"{len(rows)} geometr{'ies' if len(rows) > 1 else 'y'}; per band: {bands} "
+                     f"({_rows_text(rows, verbose)})")
+    accepted = True
+    try:
+        check_observed(Problem.from_measurements(measurements))
+    except ValueError as error:
+        accepted = False
+        lines.append(f"  infer refuses it as it stands: {error}")
+    if lines:
+        lines.insert(0, "findings:")
+    return accepted, lines
+
+
 def _check(args):
     from .data import check_report
 
-    print(check_report(args.file))
-    return 0
+    accepted = []
+
+    def notes(measurements):
+        result = _check_notes(measurements, args.verbose)
+        accepted.append(result[0])
+        return result
+
+    print(check_report(args.file, **film_state(args), verbose=args.verbose, notes=notes))
+    return EXIT_NOT_INFERABLE if False in accepted else 0
 
 
 def _simulate(args):
@@ -184,8 +272,11 @@ def build_parser():
     check = sub.add_parser("check", help="say what a measurement file holds, or every problem in it",
                            description="Read a measurement file and say what it holds (samples, "
                            "wavelengths, which of the paper's methods it supports), or list every "
-                           "problem in it with its row and field. Exit status 2 when it cannot be used.")
+                           "problem in it with its row and field. Exit status 2 when it cannot be read, 1 when "
+                           "it can but 'bayespig infer' refuses it as it stands (e.g. zero readings "
+                           "without --noise-floor).")
     add_input_argument(check, "file", help="bayespig CSV, ASTM E1392 file or wide spectral table")
+    add_film_state_arguments(check)
     add_verbosity_arguments(check)
     check.set_defaults(func=_check)
 

@@ -233,7 +233,9 @@ def check_observed(problem, noise_floor=None):
         row, column = (int(v[0]) for v in np.nonzero(bad))
         value = observed[row, column]
         count = int(bad.sum())
-        where = (f"film {film.name!r}: observed value {value:g} at {wavelength[row]:g} nm, geometry "
+        source = film.sources[column] if film.sources is not None else None
+        read_from = f"{source[0]}, row {source[1]}: " if source else ""
+        where = (f"{read_from}film {film.name!r}: observed value {value:g} at {wavelength[row]:g} nm, geometry "
                  f"{_value_names(film)[column]} (value {column + 1} of {observed.shape[1]})")
         more = f"; {count - 1} more value{'s' if count > 2 else ''} of this film as well" if count > 1 else ""
         if bad_finite[row, column]:
@@ -265,6 +267,9 @@ class FilmTerm:
         Shape (n_wavelengths, n_values).
     eps : float or None
         Known relative error of this film's values.
+    sources : tuple or None
+        Per value (column of ``observed``): the ``(file, line)`` it was read from, or None;
+        for messages only.
     """
 
     name: str
@@ -274,6 +279,7 @@ class FilmTerm:
     r_s: np.ndarray
     observed: np.ndarray
     eps: float | None = None
+    sources: tuple | None = field(default=None, compare=False, repr=False)
 
     @property
     def opaque(self):
@@ -364,11 +370,12 @@ class Problem:
                 groups.append(group)
             if sample.reflectance_measurements:
                 films.append(FilmTerm(sample.name, "reflectance", sample.instrument(subset.n), group,
-                                      subset.substrate_albedo(sample), sample.reflectance, sample.eps))
+                                      subset.substrate_albedo(sample), sample.reflectance, sample.eps,
+                                      tuple(m.source for m in sample.reflectance_measurements)))
             if sample.transmittance is not None:
                 films.append(FilmTerm(sample.name + ":transmittance", "transmittance", None, group,
                                       np.zeros(subset.n_wavelengths), sample.transmittance.values[:, None],
-                                      sample.eps))
+                                      sample.eps, (sample.transmittance.source,)))
         if not films:
             raise ValueError("the measurement set has no films to fit")
         return cls(np.asarray(subset.wavelength_nm, float), tuple(films), tuple(groups), subset.n, method)

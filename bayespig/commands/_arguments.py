@@ -13,10 +13,28 @@ import numpy as np
 from ..instruments import BUILT_IN_INSTRUMENTS, get_instrument
 from ..likelihood import method_name
 
-__all__ = ["INFER_METHODS", "INPUT_KINDS", "METHOD_HELP", "add_film_argument", "add_input_argument", "add_output_argument",
-           "add_substrate_argument", "add_verbosity_arguments", "check_input_path", "check_output_path",
-           "instrument_argument", "instrument_help", "method_argument", "paper_method_argument",
-           "parse_methods", "parse_numbers", "read_film"]
+__all__ = [
+    "INFER_METHODS",
+    "INPUT_KINDS",
+    "METHOD_HELP",
+    "add_film_argument",
+    "add_film_state_arguments",
+    "add_input_argument",
+    "add_output_argument",
+    "add_substrate_argument",
+    "add_verbosity_arguments",
+    "check_input_path",
+    "check_output_path",
+    "film_state",
+    "instrument_argument",
+    "instrument_help",
+    "method_argument",
+    "paper_method_argument",
+    "parse_methods",
+    "parse_numbers",
+    "read_film",
+    "substrate_argument",
+]
 
 #: What ``--method`` accepts, for the help texts.
 METHOD_HELP = "1, 2, 3, 4 (or method1 .. method4)"
@@ -268,3 +286,38 @@ def add_substrate_argument(parser):
                         help="treat each card's albedo seen from the binder as uncertain: one factor per "
                         "card, log-normal prior with this sd (e.g. 0.1 for ~10 %%, paper section 3.4); "
                         "samples all wavelengths jointly (slower); needs a known eps")
+
+
+def substrate_argument(text):
+    """``--substrate`` text -> ``"black"``, ``"white"``, an albedo in [0, 1] or a sample name."""
+    try:
+        value = float(text)
+    except ValueError:
+        if not text.strip():
+            raise argparse.ArgumentTypeError("expected 'black', 'white', an albedo in [0, 1] or a sample "
+                                             "name, got ''") from None
+        return text.strip()
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"an albedo must be in [0, 1], got {text!r}")
+    return value
+
+
+def add_film_state_arguments(parser):
+    """``--opaque`` / ``--substrate X``: what an ASTM E1392 file cannot say (no keyword for it)."""
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--opaque", action="store_true", default=None,
+                       help="ASTM E1392 files: the film hides its substrate (wins over an OPAQUE or "
+                       "SUBSTRATE keyword in the file)")
+    group.add_argument("--substrate", type=substrate_argument, default=None, metavar="SUBSTRATE",
+                       help="ASTM E1392 files: the film's substrate, black (r_s 0.01), white (0.95), an "
+                       "albedo in [0, 1] or a substrate sample's name; the film does not hide it (wins over the "
+                       "file's SUBSTRATE and OPAQUE)")
+
+
+def film_state(args):
+    """``read_measurements`` keyword arguments from ``--opaque`` / ``--substrate``."""
+    opaque = True if getattr(args, "opaque", None) else None
+    substrate = getattr(args, "substrate", None)
+    if substrate is not None:
+        opaque = False  # --substrate: the film lets its substrate show (an OPAQUE keyword yields)
+    return {} if opaque is None and substrate is None else {"opaque": opaque, "substrate": substrate}

@@ -13,10 +13,12 @@ from ._arguments import INFER_METHODS as _METHODS
 from ._arguments import (
     METHOD_HELP,
     add_film_argument,
+    add_film_state_arguments,
     add_input_argument,
     add_output_argument,
     add_substrate_argument,
     add_verbosity_arguments,
+    film_state,
     method_argument,
     read_film,
 )
@@ -44,6 +46,7 @@ def add_infer_parser(subparsers):
     add_output_argument(parser, "--out", kind="folder", required=True,
                         help="output folder (posterior.nc, summary.csv)")
     add_film_argument(parser)
+    add_film_state_arguments(parser)
     add_substrate_argument(parser)
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--g", default="isotropic", choices=("isotropic", "free"),
@@ -135,7 +138,7 @@ def run_infer(args):
     if isinstance(measurements, (str, os.PathLike)):
         from ..data import read_measurements
 
-        measurements = read_measurements(measurements)
+        measurements = read_measurements(measurements, **film_state(args))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ConvergenceWarning)
         idata = infer(measurements, method=_METHODS[args.method], seed=args.seed,

@@ -9,7 +9,13 @@ from pathlib import Path
 
 from ._arguments import INFER_METHODS as _METHODS
 from ._arguments import METHOD_HELP, add_input_argument, add_output_argument, add_verbosity_arguments, method_argument
-from ._arguments import add_film_argument, add_substrate_argument, read_film
+from ._arguments import (
+    add_film_argument,
+    add_film_state_arguments,
+    add_substrate_argument,
+    film_state,
+    read_film,
+)
 from .infer import eps_argument
 
 __all__ = ["add_demo_parser", "add_report_parser", "run_demo", "run_report"]
@@ -35,6 +41,7 @@ def add_report_parser(subparsers):
     add_input_argument(parser, "--measurements", default=None,
                        help="the measurement file of a posterior (thickness, concentration, truth)")
     add_film_argument(parser)
+    add_film_state_arguments(parser)
     add_substrate_argument(parser)
     parser.add_argument("--method", default="auto", type=method_argument, metavar="METHOD",
                         help=f"when inferring: the paper's method, {METHOD_HELP}, auto (default) or general")
@@ -81,6 +88,13 @@ def run_report(args):
     infer_kwargs = {"method": _METHODS[args.method], "seed": args.seed, "g": args.g,
                     "substrate_sd": args.substrate_sd, "eps": eps, "eps_given_as": "--eps"}
     source = read_film(args.source, args.film)
+    if film_state(args) and isinstance(source, (str, os.PathLike)):
+        if Path(source).suffix.lower() in NETCDF_SUFFIXES:
+            raise ValueError(f"--opaque/--substrate: {source} is a posterior; they apply when report infers "
+                             "from an ASTM E1392 file")
+        from ..data import read_measurements
+
+        source = read_measurements(source, **film_state(args))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = write_report(source, args.out, measurements=args.measurements,

@@ -251,7 +251,7 @@ def assemble(
             if id(r) not in valid_ids or np.isnan(r.values).any():
                 continue  # already reported
             try:
-                m = Measurement.from_geometry(r.kind, r.geometry, r.values)
+                m = Measurement.from_geometry(r.kind, r.geometry, r.values, (r.file, r.row))
             except MeasurementError as error:
                 problems.extend(r.locate(p) for p in error.problems)
                 continue

@@ -19,10 +19,14 @@ difference, 180° on the specular side and 0° back towards the source
 (DESIGN.md), is therefore ``delta_phi = |phi_s - phi_i|`` folded into [0°, 180°].
 Angles are rounded to 1e-4° when read. Values are BRDF in 1/sr.
 
-One file holds one sample. Besides the standard's free-form keywords (kept as
+One file holds one sample, named by the standard's ``SAMPLE_NAME`` (else ``NAME``,
+else the file name). Besides the standard's free-form keywords (kept as
 metadata), bayespig reads and writes ``NAME``, ``ROLE``, ``SUBSTRATE``,
 ``FILM_GROUP``, ``OPAQUE``, ``THICKNESS_UM``, ``CONCENTRATION``, ``EPS``, ``N``
-(binder refractive index) and ``BAYESPIG_METADATA`` (JSON). Several files (the
+(binder refractive index) and ``BAYESPIG_METADATA`` (JSON). The standard has no
+keyword for ``OPAQUE``/``SUBSTRATE``: a film whose header gives neither is refused
+unless the reader is told (``opaque=``/``substrate=``, which win over the file).
+Several files (the
 same film over black and over white, a substrate card) read together form one
 measurement set.
 """
@@ -45,6 +49,8 @@ from .model import value_problem, wavelength_problem
 from .writers import ANGLE_COLUMNS, KEYWORDS, _fmt
 
 __all__ = ["looks_like_astm_e1392", "read_astm_e1392"]
+#: Sample attributes whose argument to :func:`read_astm_e1392` wins over the file's keyword.
+OVERRIDES = ("opaque", "substrate")
 #: Decimals of a degree kept when converting angles from radians.
 ANGLE_DECIMALS = 4
 
@@ -175,7 +181,10 @@ def _read_one(path, defaults, problems, progress):
     if problems and any(p.file == name for p in problems):
         return None
 
-    sample = header.pop("NAME", "") or defaults.get("name") or Path(name).stem
+    # SAMPLE_NAME is the standard's keyword, NAME bayespig's own; the one not used (and
+    # SAMPLE_NAME always) stays in the metadata with the other free-form keywords
+    sample = header.get("SAMPLE_NAME", "") or header.pop("NAME", "")
+    sample = sample or defaults.get("name") or Path(name).stem
     n_text = header.pop("N", None)
     n = 1.45
     if n_text is not None:
@@ -214,14 +223,31 @@ def _read_one(path, defaults, problems, progress):
     for keyword, attribute in KEYWORDS.items():
         fields[attribute] = keyword
         field_rows[attribute] = header_rows.get(keyword, vars_row)
-        if keyword in header:
+        value = defaults.get(attribute)
+        if keyword in header and (attribute not in OVERRIDES or value is None):
             attributes[attribute] = header.pop(keyword)
-        elif defaults.get(attribute) is not None:
-            value = defaults[attribute]
+        elif value is not None:
+            header.pop(keyword, None)  # opaque=/substrate= win over the file's keyword
             attributes[attribute] = (
                 ("yes" if value else "no") if isinstance(value, bool) else str(value)
             )
     attributes.setdefault("role", "film")
+    undecided = (
+        attributes["role"] == "film"
+        and not attributes.get("substrate", "").strip()
+        and not attributes.get("opaque", "").strip()
+    )
+    if undecided:
+        problems.append(
+            Problem(
+                "the header says neither OPAQUE nor SUBSTRATE (ASTM E1392 has no keyword for "
+                "them): say whether the film hides its substrate with opaque=True (--opaque on "
+                "the command line) or give substrate='black', 'white' or an albedo "
+                "(--substrate), or add the header line 'OPAQUE yes' or 'SUBSTRATE black'",
+                file=name,
+                field="OPAQUE",
+            )
+        )
     if header:
         metadata.setdefault("astm_e1392_header", {})[sample] = header
 
@@ -340,6 +366,8 @@ def _read_one(path, defaults, problems, progress):
             )
     if not rows and not any(p.file == name for p in problems):
         problems.append(Problem("no data rows after VARS", file=name, row=vars_row))
+    if undecided:
+        return None  # said once above, not once more per sample by the set's checks
     return name, rows, np.array(wavelength_nm), n, metadata
 
 
@@ -360,11 +388,16 @@ def read_astm_e1392(
     ----------
     paths : path or sequence of paths
         One file per sample.
-    name, role, substrate, opaque, film_group : optional
-        Used when a file's header does not give ``NAME``, ``ROLE`` (default
-        ``"film"``), ``SUBSTRATE`` (``"black"``, ``"white"``, an albedo or the
-        name of a substrate sample in another of the files), ``OPAQUE`` or
-        ``FILM_GROUP``.
+    name, role, film_group : optional
+        Used when a file's header does not give ``SAMPLE_NAME`` (the standard's
+        keyword) or ``NAME``, ``ROLE`` (default ``"film"``) or ``FILM_GROUP``.
+    substrate, opaque : optional
+        ``SUBSTRATE`` (``"black"``, ``"white"``, an albedo or the name of a
+        substrate sample in another of the files) and ``OPAQUE`` (True when the
+        film hides its substrate). ASTM E1392 has no keyword for either, so a
+        film whose header gives neither is refused unless one is passed here.
+        When given, the argument wins over the file's keyword (the keyword is
+        then dropped, not kept as metadata).
     resample : bool
         Interpolate files with different wavelengths onto the wavelengths all
         cover (with a warning) instead of raising.

@@ -56,7 +56,18 @@ def read_all(path, *, resample=False):
     return _read(source, file_format(source), resample)
 
 
-def read_measurements(path, *, film=None, resample=False):
+def _film_options(opaque, substrate):
+    """``opaque``/``substrate`` arguments checked, as keyword arguments of the E1392 reader."""
+    if opaque is not None and not isinstance(opaque, bool):
+        raise TypeError(f"opaque must be True, False or None, got {opaque!r}")
+    if substrate is not None and (isinstance(substrate, bool) or not isinstance(substrate, (str, int, float))):
+        raise TypeError(
+            f"substrate must be 'black', 'white', an albedo in [0, 1], a sample name or None, got {substrate!r}"
+        )
+    return {"opaque": opaque, "substrate": substrate}
+
+
+def read_measurements(path, *, film=None, resample=False, opaque=None, substrate=None):
     """Read a measurement file of any supported format.
 
     Parameters
@@ -70,6 +81,14 @@ def read_measurements(path, *, film=None, resample=False):
     resample : bool
         Interpolate rows measured at different wavelengths onto the wavelengths
         they share (with a warning) instead of raising.
+    opaque : bool, optional
+        ASTM E1392 files only (the standard has no keyword for it): True when the
+        film hides its substrate, False when it does not (then it needs a
+        substrate). Wins over an ``OPAQUE`` keyword in the file.
+    substrate : str or float, optional
+        ASTM E1392 files only: the film's substrate, ``"black"`` (r_s = 0.01),
+        ``"white"`` (0.95), an albedo in [0, 1] or the name of a substrate sample
+        in another of the files. Wins over a ``SUBSTRATE`` keyword in the file.
 
     Returns
     -------
@@ -79,13 +98,27 @@ def read_measurements(path, *, film=None, resample=False):
     ------
     MeasurementError
         Every problem found, each naming the file, row and field.
+    ValueError
+        ``opaque`` or ``substrate`` given for a CSV file or a spectral table
+        (they state it per sample).
+    TypeError
+        ``opaque`` or ``substrate`` of the wrong type.
     """
+    options = _film_options(opaque, substrate)
+    given = [k for k, v in options.items() if v is not None]
     if isinstance(path, MeasurementSet):
+        if given:
+            raise ValueError(f"{given[0]}= applies when reading an ASTM E1392 file, not to a MeasurementSet")
         return path
     if not isinstance(path, (str, os.PathLike, Source, Path)):
-        return read_astm_e1392(list(path), resample=resample)
+        return read_astm_e1392(list(path), resample=resample, **options)
     path = _open(path)
     kind = file_format(path)
+    if given and kind != "astm_e1392":
+        raise ValueError(
+            f"{given[0]}= applies to ASTM E1392 files, whose header has no standard keyword for it; "
+            f"a {kind.replace('_', ' ')} file states it per sample (its {given[0]} column)"
+        )
     if kind == "spectral_table":
         sets = read_revigo(path)
         if film is None and len(sets) == 1:
@@ -104,16 +137,80 @@ def read_measurements(path, *, film=None, resample=False):
             )
         return sets[film]
     if kind == "astm_e1392":
-        return read_astm_e1392(path, resample=resample)
+        return read_astm_e1392(path, resample=resample, **options)
     return read_csv(path, resample=resample)
 
 
-def check_report(path):
+#: A sample with more geometries of one kind than this is summarised (angle ranges, counts per
+#: incidence angle) by ``bayespig check`` instead of listing every label.
+GEOMETRY_LIST_MAX = 24
+
+
+def _fmt_deg(x):
+    return f"{x:.4g}°"
+
+
+def _geometry_lines(sample, verbose):
+    """What a sample was measured at: every label, or for many geometries a summary."""
+    kinds = {}
+    for m in sample.measurements:
+        kinds.setdefault(m.kind, []).append(m)
+    parts, listed = [], []
+    for kind, measurements in kinds.items():
+        if len(measurements) <= GEOMETRY_LIST_MAX:
+            parts.append(f"{kind} at {', '.join(m.label for m in measurements)}")
+            continue
+        incidence = {}
+        for m in measurements:
+            incidence[m.theta_i] = incidence.get(m.theta_i, 0) + 1
+        in_plane = sum(m.delta_phi in (0.0, 180.0) for m in measurements)
+        theta_o = [m.theta_o for m in measurements]
+        delta_phi = [m.delta_phi for m in measurements]
+        parts.append(
+            f"{kind} at {len(measurements)} geometries: theta_i "
+            + ", ".join(f"{_fmt_deg(t)} ({c})" for t, c in sorted(incidence.items()))
+            + f"; theta_o {_fmt_deg(min(theta_o))}–{_fmt_deg(max(theta_o))}; delta_phi "
+            f"{_fmt_deg(min(delta_phi))}–{_fmt_deg(max(delta_phi))}; {in_plane} in the plane of "
+            f"incidence, {len(measurements) - in_plane} out of it"
+            + ("" if verbose else " (--verbose lists them)")
+        )
+        if verbose:
+            listed.extend(f"    {kind} {m.label}" for m in measurements)
+    return parts, listed
+
+
+def _summary_text(measurements, verbose):
+    """The set's summary with the geometry line of each sample condensed when it is long."""
+    lines = measurements.summary().split("\n")
+    start = lines.index("samples:") + 1
+    out = lines[:start]
+    for k, sample in enumerate(measurements.samples):
+        head, what = lines[start + 2 * k], lines[start + 2 * k + 1]
+        parts, listed = _geometry_lines(sample, verbose)
+        indent = what[: len(what) - len(what.lstrip())]
+        out.append(head)
+        out.extend(f"{indent}{part}" for part in parts)
+        out.extend(listed)
+    out.extend(lines[start + 2 * len(measurements.samples):])
+    return "\n".join(out)
+
+
+def check_report(path, *, opaque=None, substrate=None, verbose=False, notes=None):
     """What a measurement file holds, for ``bayespig check FILE``.
 
     Parameters
     ----------
     path : str or os.PathLike
+    opaque, substrate : optional
+        As :func:`read_measurements` (ASTM E1392 files).
+    verbose : bool
+        List every geometry of a sample measured at many (one per line) besides
+        the summary of their angles.
+    notes : callable, optional
+        ``notes(measurements) -> (accepted, lines)`` for a file holding one set:
+        whether inference takes the set as it stands and lines to add (what
+        ``bayespig check`` adds: rows near the mirror direction, implausible
+        values, zeros). When ``accepted`` is False the file is not called valid.
 
     Returns
     -------
@@ -129,10 +226,20 @@ def check_report(path):
     """
     source = _open(path)
     kind = file_format(source)
-    sets = _read(source, kind, False)
+    options = _film_options(opaque, substrate)
+    if any(v is not None for v in options.values()):
+        sets = {Path(str(getattr(source, "name", source))).stem: read_measurements(source, **options)}
+    else:
+        sets = _read(source, kind, False)
     lines = [f"{path}: {kind.replace('_', ' ')} file, valid"]
     if len(sets) == 1:
-        lines.append(next(iter(sets.values())).summary())
+        measurements = next(iter(sets.values()))
+        lines.append(_summary_text(measurements, verbose))
+        if notes is not None:
+            accepted, extra = notes(measurements)
+            if not accepted:
+                lines[0] = f"{path}: {kind.replace('_', ' ')} file, readable, but not valid for infer as it stands"
+            lines.extend(extra)
         return "\n".join(lines)
     lines.append(f"{len(sets)} films (read one with read_measurements(path, film=<id>))")
     for film_id, measurements in sets.items():

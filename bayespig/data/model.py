@@ -393,6 +393,9 @@ class Measurement:
         For hemispherical measurements, SCI or SCE.
     values : numpy.ndarray
         Shape (n_wavelengths,), fractions (read-only).
+    source : tuple of (str, int) or None
+        The file and 1-based line the values were read from, for messages (None
+        when not read from a file); not part of equality.
     """
 
     kind: str
@@ -402,6 +405,7 @@ class Measurement:
     delta_phi: float
     specular: str | None
     values: np.ndarray
+    source: tuple | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         try:
@@ -439,7 +443,7 @@ class Measurement:
         object.__setattr__(self, "values", values)
 
     @classmethod
-    def from_geometry(cls, kind, geometry, values):
+    def from_geometry(cls, kind, geometry, values, source=None):
         """A measurement from kind, geometry and values (:func:`parse_measurement_geometry`)."""
         try:
             angles = parse_measurement_geometry(kind, geometry)
@@ -455,6 +459,7 @@ class Measurement:
             angles["delta_phi"],
             angles["specular"],
             values,
+            source,
         )
 
     @classmethod

@@ -51,8 +51,11 @@ def test_zero_needs_a_noise_floor(tmp_path, capsys):
     n_values = len(ms.samples[1].measurements)
     assert main(["infer", str(data), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
     name = ms.samples[1].name
+    # the line of the file that holds the zero (the error names it)
+    row = next(k for k, line in enumerate(data.read_text().splitlines(), 1)
+               if line.startswith(f"{name},") and f",brdf,{label}," in line)
     assert capsys.readouterr().err == (
-        f"bayespig: error: film {name!r}: observed value 0 at 550 nm, geometry {label} (value {n_values} of "
+        f"bayespig: error: {data}, row {row}: film {name!r}: observed value 0 at 550 nm, geometry {label} (value {n_values} of "
         f"{n_values}) must be > 0 without a noise floor (eq. 7 gives a zero reading zero likelihood); give "
         "noise_floor=<number> or 'infer' (--noise-floor on the command line) to take zeros as data\n")
     assert not (tmp_path / "out").exists()

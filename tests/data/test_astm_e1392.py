@@ -88,8 +88,12 @@ def test_plain_file_with_defaults(tmp_path):
     )
     with pytest.raises(MeasurementError) as info:
         read_measurements(path)
-    problem = info.value.problems[0]
-    assert problem.field == "SUBSTRATE" and problem.row == 3 and "needs a substrate" in str(problem)
+    assert str(info.value) == (
+        f"{path}, field 'OPAQUE': the header says neither OPAQUE nor SUBSTRATE (ASTM E1392 has "
+        "no keyword for them): say whether the film hides its substrate with opaque=True "
+        "(--opaque on the command line) or give substrate='black', 'white' or an albedo "
+        "(--substrate), or add the header line 'OPAQUE yes' or 'SUBSTRATE black'"
+    )
     ms = read_astm_e1392(path, substrate="white")
     assert ms.sample("plain").substrate == "white"
     assert ms.sample("plain").measurements[0].label == "45as15"
