@@ -19,6 +19,13 @@ measurement file, inferred first) and writes into ``out_dir``:
     their prior, :func:`~bayespig.report.quantities.prior_edges`), predicted films,
     diagnostics and provenance.
 
+``fit_by_geometry.csv`` and ``colour_by_geometry.csv``
+    Only for sets of more than :data:`~bayespig.report.quantities.GONIO_LARGE_GEOMETRIES` BRDF
+    geometries (gonio measurements), whose report shows the fit in the plane of incidence, as a
+    residual map over viewing directions and as residual statistics by distance from the
+    mirror direction instead of a table row per geometry: every geometry's angles, distance
+    from the mirror, residuals and colour.
+
 A posterior of opaque films only (no ``tau``) gets the same report without what needs ``tau``
 (its bands and columns, extinction, the ravine, films other than the opaque one), and says why
 (:data:`OPAQUE_ONLY_TEXT`).
@@ -694,6 +701,11 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
                                   instrument=_colour_instrument(problem) if large_gonio else None)
         blocks.append(doc.heading("Predicted films", 3))
         instrument_labels = list(dict.fromkeys(p["channel"] for p in predicted))
+        if large_gonio:
+            blocks.append(doc.paragraph(
+                f"Predicted at {len(instrument_labels)} of the measured geometries (in the plane of incidence, "
+                "nearest 45° incidence, at aspecular angles near "
+                + ", ".join(f"{a:g}" for a in GONIO_COLOUR_ASPECULARS_DEG) + "°)."))
         if has_tau:
             blocks.append(doc.paragraph(
                 "Colour of films made with this pigment that were not measured, predicted from the "
@@ -909,6 +921,9 @@ def _colour_instrument(problem):
     channels = [ch for ch in reference.channels if ch.kind == "brdf"]
     theta_i = min({ch.theta_i for ch in channels}, key=lambda t: abs(t - 45.0))
     candidates = [ch for ch in channels if ch.theta_i == theta_i]
+    in_plane = [ch for ch in candidates if np.isclose(np.mod(ch.delta_phi, 180.0), 0.0)
+                or np.isclose(np.mod(ch.delta_phi, 180.0), 180.0)]
+    candidates = in_plane or candidates
     distance = mirror_distance_deg([ch.theta_i for ch in candidates], [ch.theta_o for ch in candidates],
                                    [ch.delta_phi for ch in candidates])
     chosen = []

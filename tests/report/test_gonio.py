@@ -86,6 +86,10 @@ def test_large_gonio_set_has_the_summary_figures_and_not_the_per_geometry_ones(l
     assert ("68 BRDF geometries: too many to list, so the fit is shown in the plane of incidence, as a map "
             "over viewing directions and as statistics by distance from the mirror; every geometry's "
             r"residuals are in fit\_by\_geometry.csv.") in markdown
+    # predicted colours at a few in-plane geometries at 45°, not at all 68
+    assert ("Predicted at 3 of the measured geometries (in the plane of incidence, nearest 45° incidence, "
+            "at aspecular angles near 15, 45, 110°).") in markdown
+    assert "at the geometries 45as15, 45as45, 45as105." in markdown
 
 
 def test_residual_table_by_distance_from_the_mirror(large):
