@@ -440,7 +440,7 @@ def residual_map_figure(gonio, incidences, *, title="median over bands"):
         ax.plot([np.pi], [theta_i], "*", color="k", ms=12, mfc="none", label="mirror direction")
         ax.set_rlim(0, 90)
         ax.set_rticks([30, 60, 90])
-        ax.set_rlabel_position(112.5)
+        ax.set_rlabel_position(247.5)  # in the empty half of isotropic data (delta_phi in 0-180)
         ax.set_yticklabels(["30°", "60°", "90°"], fontsize=7)
         ax.tick_params(axis="x", labelsize=7)
         ax.set_title(f"incidence {theta_i:g}°", fontsize=10)

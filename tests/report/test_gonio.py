@@ -133,3 +133,21 @@ def test_small_set_keeps_the_per_geometry_tables_and_figures(small):
     assert OLD_FIT_HEADER in markdown and OLD_COLOUR_HEADER in markdown
     assert "### Residuals by distance from the mirror" not in markdown
     assert "- Samples: paint (opaque; 45as-15, 45as15, 45as25, 45as45, 45as75, 45as110)" in markdown
+
+
+def test_signed_viewing_angle_and_mirror_distance_of_value_rows():
+    """In-plane rows (delta_phi 0, 180 and 180 less a rounding of pi in radians) get a signed viewing angle."""
+    from bayespig.report.quantities import gonio_values, is_large_gonio_set
+
+    rows = [{"sample": "s", "channel": label, "kind": "brdf", "film_group": ""}
+            for label in ("45/30/180", "45/30/0", "45/60/90", "45/0/0", "30/20/179.99998")]
+    rows.append({"sample": "s", "channel": "8d-sce", "kind": "hemispherical", "film_group": ""})
+    geometry = gonio_values(rows)
+    assert list(geometry["index"]) == [0, 1, 2, 3, 4]
+    signed = geometry["signed_theta_o"]
+    assert signed[0] == 30.0 and signed[1] == -30.0 and np.isnan(signed[2]) and signed[3] == 0.0
+    assert signed[4] == pytest.approx(20.0)
+    expected = [_mirror_angle_deg(*g) for g in ((45, 30, 180), (45, 30, 0), (45, 60, 90), (45, 0, 0),
+                                                   (30, 20, 179.99998))]
+    assert geometry["mirror_distance_deg"] == pytest.approx(expected, abs=1e-9)
+    assert not is_large_gonio_set(rows) and is_large_gonio_set(rows, threshold=4)
