@@ -767,7 +767,7 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     blocks.append(doc.heading("Priors, settings and provenance"))
     blocks.append(doc.bullets([f"{k}: {v}" if k != "tau" or has_tau else
                                "tau: not a parameter (every film is opaque)" for k, v in priors.describe().items()]))
-    prov_text = json.dumps(_jsonable(prov), indent=2, sort_keys=True, default=str)
+    prov_text = json.dumps(_jsonable(_shown_provenance(prov)), indent=2, sort_keys=True, default=str)
     blocks.append(doc.preformatted(prov_text))
     created = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     from .. import __version__
@@ -932,6 +932,22 @@ def _colour_instrument(problem):
         if candidates[k] not in chosen:
             chosen.append(candidates[k])
     return Instrument(f"{reference.name} (a few geometries)", tuple(chosen), reference.n)
+
+
+def _shown_provenance(prov):
+    """The provenance as the report prints it: an instrument of more than
+    :data:`~bayespig.report.quantities.GONIO_LARGE_GEOMETRIES` geometries as their count
+    (``summary.json`` and ``posterior.nc`` keep every label)."""
+    instruments = prov.get("instruments")
+    if not isinstance(instruments, dict):
+        return prov
+    shown = {}
+    for name, labels in instruments.items():
+        if isinstance(labels, (list, tuple)) and len(labels) > q.GONIO_LARGE_GEOMETRIES:
+            shown[name] = f"{len(labels)} geometries (listed in summary.json and fit_by_geometry.csv)"
+        else:
+            shown[name] = labels
+    return {**prov, "instruments": shown}
 
 
 def _phase_text(idata, prov):

@@ -27,6 +27,9 @@ VIEWING_DEG = (0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0)
 #: The median |relative residual| of a correct fit is ~0.674 eps (half-normal median); the
 #: fitted curve's own error and 68 values per band put it within a factor of 2 of that.
 MEDIAN_RESIDUAL_RANGE = (0.674 * EPS / 2.0, 0.674 * EPS * 2.0)
+#: A report of 68 geometries has about as many lines as one of 6 (~220): listing the geometries
+#: in the fit, colour and provenance would add >= 3 x 68.
+MAX_REPORT_LINES = 260
 #: The CSV writes the mirror distance with 4 decimals [deg]: half a unit of the last one.
 MIRROR_ANGLE_TOL_DEG = 5e-5 + 1e-9
 
@@ -90,6 +93,8 @@ def test_large_gonio_set_has_the_summary_figures_and_not_the_per_geometry_ones(l
     assert ("Predicted at 3 of the measured geometries (in the plane of incidence, nearest 45° incidence, "
             "at aspecular angles near 15, 45, 110°).") in markdown
     assert "at the geometries 45as15, 45as45, 45as105." in markdown
+    assert '"sample:paint": "68 geometries (listed in summary.json and fit_by_geometry.csv)"' in markdown
+    assert len(markdown.splitlines()) < MAX_REPORT_LINES
 
 
 def test_residual_table_by_distance_from_the_mirror(large):
@@ -133,6 +138,7 @@ def test_small_set_keeps_the_per_geometry_tables_and_figures(small):
     assert OLD_FIT_HEADER in markdown and OLD_COLOUR_HEADER in markdown
     assert "### Residuals by distance from the mirror" not in markdown
     assert "- Samples: paint (opaque; 45as-15, 45as15, 45as25, 45as45, 45as75, 45as110)" in markdown
+    assert '"45as-15",' in markdown  # the provenance lists a few geometries
 
 
 def test_signed_viewing_angle_and_mirror_distance_of_value_rows():
