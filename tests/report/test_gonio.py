@@ -157,3 +157,29 @@ def test_signed_viewing_angle_and_mirror_distance_of_value_rows():
                                                    (30, 20, 179.99998))]
     assert geometry["mirror_distance_deg"] == pytest.approx(expected, abs=1e-9)
     assert not is_large_gonio_set(rows) and is_large_gonio_set(rows, threshold=4)
+
+
+def test_gonio_figures_have_one_panel_per_incidence_with_labelled_axes():
+    """Eight incidences are shown as six spread over them; log BRDF axis in 1/sr."""
+    from bayespig.report.figures import plane_of_incidence_figure, residual_map_figure
+    from bayespig.report.quantities import gonio_residual_summary
+
+    incidences = (10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0)
+    labels = [f"{ti:g}/{to:g}/{dp:g}" for ti in incidences for to in (5.0, 25.0, 45.0) for dp in (0.0, 180.0)]
+    rows = [{"sample": "s", "channel": label, "kind": "brdf", "film_group": ""} for label in labels]
+    rng = np.random.default_rng(0)
+    draws = 0.05 * (1.0 + 0.01 * rng.standard_normal((20, 3, len(rows))))
+    gonio = gonio_residual_summary({"rows": rows, "predicted_draws": draws,
+                                    "observed": np.median(draws, axis=0) * 1.1})
+    assert gonio["relative"] == pytest.approx(np.full((3, len(rows)), 0.1), rel=1e-12)  # fitted: the median
+    shown = [10.0, 20.0, 40.0, 50.0, 70.0, 80.0]
+    fig = plane_of_incidence_figure(np.array([400.0, 550.0, 700.0]), gonio, [0, 2], shown)
+    panels = [ax for ax in fig.axes if ax.get_visible()]
+    assert [ax.get_title() for ax in panels] == [f"incidence {t:g}° (6 in-plane geometries)" for t in shown]
+    assert {ax.get_xlabel() for ax in panels} == {"signed viewing angle [deg] (+ specular side)"}
+    assert [ax.get_ylabel() for ax in panels if ax.get_ylabel()] == ["BRDF [1/sr]", "BRDF [1/sr]"]
+    assert {ax.get_yscale() for ax in panels} == {"log"}
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == [
+        "400 nm fit", "400 nm measured", "700 nm fit", "700 nm measured", "mirror direction"]
+    polar = residual_map_figure(gonio, shown)
+    assert [ax.get_title() for ax in polar.axes if ax.name == "polar"] == [f"incidence {t:g}°" for t in shown]
