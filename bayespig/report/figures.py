@@ -339,14 +339,6 @@ def diagnostics_figure(wl, diag):
     return fig
 
 
-def _spread(values, count):
-    """Up to ``count`` of the sorted unique ``values``, spread evenly over their range."""
-    values = np.unique(np.asarray(values, dtype=float))
-    if values.size <= count:
-        return values
-    return values[np.unique(np.linspace(0, values.size - 1, count).round().astype(int))]
-
-
 def plane_of_incidence_figure(wl, gonio, band_indices, incidences):
     """Measured vs fitted BRDF in the plane of incidence, one panel per incidence angle.
 

@@ -92,6 +92,7 @@ __all__ = [
     "ravine",
     "record_eps_source",
     "residuals_in_eps",
+    "spread_values",
     "value_table",
     "wavelengths",
 ]
@@ -1297,6 +1298,15 @@ def gonio_values(rows):
             "delta_phi": delta_phi, "signed_theta_o": signed,
             "mirror_distance_deg": mirror_distance_deg(theta_i, theta_o, delta_phi),
             "sample": [rows[k]["sample"] for k in index], "channel": [rows[k]["channel"] for k in index]}
+
+
+def spread_values(values, count):
+    """Up to ``count`` of the sorted unique ``values`` (e.g. incidence angles), spread evenly
+    over them (the first and the last always among them)."""
+    values = np.unique(np.asarray(values, dtype=float))
+    if values.size <= count:
+        return values
+    return values[np.unique(np.linspace(0, values.size - 1, count).round().astype(int))]
 
 
 def is_large_gonio_set(rows, threshold=GONIO_LARGE_GEOMETRIES):

@@ -840,7 +840,7 @@ def _gonio_fit_blocks(wl, residuals, fit_rows, blocks, add_figure, extra):
     gonio = q.gonio_residual_summary(residuals)
     geometry = gonio["geometry"]
     in_plane = np.isfinite(geometry["signed_theta_o"])
-    incidences = figs._spread(geometry["theta_i"][in_plane] if in_plane.any() else geometry["theta_i"],
+    incidences = q.spread_values(geometry["theta_i"][in_plane] if in_plane.any() else geometry["theta_i"],
                               GONIO_MAX_INCIDENCES)
     band_indices = sorted(set(np.linspace(0, wl.size - 1, min(GONIO_PLANE_BANDS, wl.size)).round().astype(int)))
     n = geometry["index"].size
@@ -854,7 +854,7 @@ def _gonio_fit_blocks(wl, residuals, fit_rows, blocks, add_figure, extra):
                    "90 % band) in the plane of incidence against the signed viewing angle (+ on the specular "
                    "side, delta_phi = 180°; - on the source side, delta_phi = 0°), at "
                    + ", ".join(f"{wl[i]:g}" for i in band_indices) + " nm; dotted: the mirror direction.")
-    map_incidences = figs._spread(geometry["theta_i"], GONIO_MAX_INCIDENCES)
+    map_incidences = q.spread_values(geometry["theta_i"], GONIO_MAX_INCIDENCES)
     add_figure("residual_map", figs.residual_map_figure(gonio, list(map_incidences)),
                "Relative residual (measured - fitted) / fitted, median over the bands, at every viewing "
                "direction (polar angle: azimuth delta_phi from the source, 180° = specular side; radius: "
