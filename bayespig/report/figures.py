@@ -19,7 +19,9 @@ __all__ = [
     "diagnostics_figure",
     "fit_figure",
     "parameter_figure",
+    "plane_of_incidence_figure",
     "ravine_figure",
+    "residual_map_figure",
     "residual_figure",
     "swatch_figure",
     "to_png",
@@ -334,4 +336,111 @@ def diagnostics_figure(wl, diag):
     ax_rhat.set_xlabel("wavelength [nm]")
     for ax in (ax_ess, ax_rhat):
         ax.grid(alpha=0.3)
+    return fig
+
+
+def plane_of_incidence_figure(wl, gonio, band_indices, incidences):
+    """Measured vs fitted BRDF in the plane of incidence, one panel per incidence angle.
+
+    x: the signed viewing angle (``+theta_o`` on the specular side, ``delta_phi = 180``;
+    ``-theta_o`` on the source side, ``delta_phi = 0``) [deg]; y: BRDF [1/sr], log scale.
+    Lines: posterior median of the noise-free fit, bands: its 90 % interval, points: the
+    measurements; one colour per band; a dotted line at the mirror direction.
+
+    Parameters
+    ----------
+    wl : numpy.ndarray
+        Wavelengths [nm].
+    gonio : dict
+        :func:`bayespig.report.quantities.gonio_residual_summary`.
+    band_indices : sequence of int
+        Wavelengths shown (indices into ``wl``).
+    incidences : sequence of float
+        Incidence angles of the panels [deg].
+    """
+    geometry = gonio["geometry"]
+    n = len(incidences)
+    ncols = min(n, 3)
+    nrows = int(np.ceil(n / ncols))
+    fig = _figure(4.2 * ncols + 0.4, 3.4 * nrows + 0.5)
+    axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False, sharey=True)).ravel()
+    for ax, theta_i in zip(axes, incidences):
+        member = np.flatnonzero(np.isclose(geometry["theta_i"], theta_i) & np.isfinite(geometry["signed_theta_o"]))
+        order = member[np.argsort(geometry["signed_theta_o"][member])]
+        x = geometry["signed_theta_o"][order]
+        for j, i in enumerate(band_indices):
+            colour = _PANEL_COLOURS[j % len(_PANEL_COLOURS)]
+            ax.fill_between(x, gonio["fitted_q05"][i, order], gonio["fitted_q95"][i, order], color=colour,
+                            alpha=0.25, lw=0)
+            ax.plot(x, gonio["fitted_median"][i, order], color=colour, lw=1.3, label=f"{wl[i]:g} nm fit")
+            ax.plot(x, gonio["measured"][i, order], "o", color=colour, ms=3.5, mfc="none",
+                    label=f"{wl[i]:g} nm measured")
+        ax.axvline(theta_i, color="k", ls=":", lw=1.0, label="mirror direction")
+        ax.axvline(0.0, color="0.6", lw=0.6)
+        ax.set_yscale("log")
+        ax.set_title(f"incidence {theta_i:g}° ({order.size} in-plane geometries)", fontsize=10)
+        ax.set_xlabel("signed viewing angle [deg] (+ specular side)")
+        ax.grid(alpha=0.3, which="both")
+    for ax in axes[::ncols]:
+        ax.set_ylabel(VALUE_LABELS["brdf"])
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncols=min(len(labels), 4), fontsize=8)
+    fig.suptitle("BRDF in the plane of incidence: measured (circles), fit median and 90 % band (lines)",
+                 fontsize=11)
+    return fig
+
+
+#: The colour scale of the residual map ends at the 98th percentile of |residual|, within
+#: these bounds [-] (so a few per cent show as colour, and gloss peaks do not wash out the rest).
+RESIDUAL_MAP_LIMITS = (0.02, 1.0)
+
+
+def residual_map_figure(gonio, incidences, *, title="median over bands"):
+    """Relative residual (measured - fitted) / fitted over viewing directions, one polar panel
+    per incidence angle.
+
+    Angle of the polar plot: the azimuth of the viewing direction from that of the source
+    (``delta_phi``, 180° on the specular side); radius: the viewing angle ``theta_o`` [deg];
+    colour: the median over bands of the relative residual (diverging, symmetric, clipped at
+    its 98th percentile of magnitude within :data:`RESIDUAL_MAP_LIMITS`); a star marks the
+    mirror direction.
+    """
+    from matplotlib.colors import Normalize
+
+    geometry = gonio["geometry"]
+    with np.errstate(invalid="ignore"):
+        shown = np.nanmedian(gonio["relative"], axis=0) if gonio["relative"].size else np.zeros(0)
+    n = len(incidences)
+    ncols = min(n, 3)
+    nrows = int(np.ceil(n / ncols))
+    fig = _figure(3.8 * ncols + 1.2, 3.8 * nrows + 0.6)
+    finite = np.abs(shown[np.isfinite(shown)])
+    limit = float(np.clip(np.quantile(finite, 0.98) if finite.size else RESIDUAL_MAP_LIMITS[0],
+                          *RESIDUAL_MAP_LIMITS))
+    norm = Normalize(-limit, limit)
+    image = None
+    axes = []
+    for k, theta_i in enumerate(incidences):
+        ax = fig.add_subplot(nrows, ncols, k + 1, projection="polar")
+        axes.append(ax)
+        member = np.isclose(geometry["theta_i"], theta_i)
+        image = ax.scatter(np.radians(geometry["delta_phi"][member]), geometry["theta_o"][member],
+                           c=np.clip(shown[member], -limit, limit), cmap="RdBu_r",
+                           norm=norm, s=18, edgecolors="0.3", linewidths=0.3)
+        ax.plot([np.pi], [theta_i], "*", color="k", ms=12, mfc="none", label="mirror direction")
+        ax.set_rlim(0, 90)
+        ax.set_rticks([30, 60, 90])
+        ax.set_rlabel_position(247.5)  # in the empty half of isotropic data (delta_phi in 0-180)
+        ax.set_yticklabels(["30°", "60°", "90°"], fontsize=7)
+        ax.tick_params(axis="x", labelsize=7)
+        ax.set_title(f"incidence {theta_i:g}°", fontsize=10)
+    if axes:
+        axes[0].legend(loc="upper left", bbox_to_anchor=(-0.25, 1.15), fontsize=7, frameon=False)
+    if image is not None:
+        fig.colorbar(image, ax=axes, shrink=0.8,
+                     label=f"(measured - fitted) / fitted, {title} (clipped at +-{limit:.2g})")
+    fig.suptitle("Relative residual over viewing directions: azimuth delta_phi from the source "
+                 "(180° = specular side), radius theta_o [deg]", fontsize=10)
     return fig

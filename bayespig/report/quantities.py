@@ -54,6 +54,8 @@ __all__ = [
     "PRIOR_EDGE_FRACTION",
     "RHAT_MAX",
     "SPREAD_QUANTILE",
+    "GONIO_LARGE_GEOMETRIES",
+    "MIRROR_DISTANCE_BINS_DEG",
     "FilmDesign",
     "Lab_to_sRGB",
     "Ravine",
@@ -68,8 +70,13 @@ __all__ = [
     "eps_source",
     "extinction",
     "film_colour",
+    "gonio_residual_summary",
+    "gonio_values",
+    "is_large_gonio_set",
     "measured_colour",
     "measurement_kind",
+    "mirror_distance_class",
+    "mirror_distance_labels",
     "model_check_status",
     "parameter_bands",
     "parameters_per_wavelength",
@@ -85,9 +92,17 @@ __all__ = [
     "ravine",
     "record_eps_source",
     "residuals_in_eps",
+    "spread_values",
     "value_table",
     "wavelengths",
 ]
+
+#: Above this many BRDF geometries a report summarises them (plane-of-incidence figure,
+#: residual map, residual statistics by distance from the mirror) instead of listing each.
+GONIO_LARGE_GEOMETRIES = 40
+#: Edges of the distance-from-the-mirror classes of the residual statistics [deg]:
+#: < 2, 2-10, 10-30, >= 30.
+MIRROR_DISTANCE_BINS_DEG = (0.0, 2.0, 10.0, 30.0, np.inf)
 
 #: R-hat above this flags a wavelength (Vehtari et al. 2021 recommend 1.01).
 RHAT_MAX = 1.01
@@ -1236,3 +1251,130 @@ def ravine(idata, index, *, a_limits=None, tau_limits=None, n_grid=121, problem=
     theta = np.clip(theta, log_post.lower, log_post.upper)
     value = log_post.log_likelihood(theta).reshape(A.shape)
     return Ravine(float(problem.wavelength_nm[index]), a_grid, tau_grid, value, held)
+
+
+# ------------------------------------------------------------------------------------------
+# many BRDF geometries (gonio sets)
+
+
+def gonio_values(rows):
+    """The BRDF values of a value table and their angles.
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`value_table` (or ``residuals_in_eps(...)["rows"]``).
+
+    Returns
+    -------
+    dict
+        ``index`` (columns of the values that are BRDFs), ``theta_i``, ``theta_o``,
+        ``delta_phi`` [deg] (``delta_phi = 180`` on the specular side, DESIGN section 1),
+        ``signed_theta_o`` [deg] (``+theta_o`` on the specular side of the plane of incidence,
+        ``delta_phi = 180``, ``-theta_o`` on the source side; NaN out of the plane),
+        ``mirror_distance_deg`` (:func:`bayespig.selection.mirror_distance_deg`), ``sample``
+        and ``channel``; arrays over the BRDF values.
+    """
+    from ..selection import mirror_distance_deg
+
+    index, angles = [], []
+    for k, row in enumerate(rows):
+        if _is_transmittance(row):
+            continue
+        try:
+            channel = _channel_of(row["channel"], row["kind"])
+        except ValueError:
+            continue
+        if channel.kind == "brdf":
+            index.append(k)
+            angles.append((channel.theta_i, channel.theta_o, channel.delta_phi))
+    angles = np.asarray(angles, dtype=float).reshape(-1, 3)
+    theta_i, theta_o, delta_phi = angles.T
+    azimuth = np.mod(delta_phi, 360.0)
+    signed = np.where(np.isclose(azimuth, 180.0), theta_o,
+                      np.where(np.isclose(azimuth, 0.0) | np.isclose(azimuth, 360.0), -theta_o, np.nan))
+    signed = np.where(theta_o == 0.0, 0.0, signed)
+    return {"index": np.asarray(index, dtype=int), "theta_i": theta_i, "theta_o": theta_o,
+            "delta_phi": delta_phi, "signed_theta_o": signed,
+            "mirror_distance_deg": mirror_distance_deg(theta_i, theta_o, delta_phi),
+            "sample": [rows[k]["sample"] for k in index], "channel": [rows[k]["channel"] for k in index]}
+
+
+def spread_values(values, count):
+    """Up to ``count`` of the sorted unique ``values`` (e.g. incidence angles), spread evenly
+    over them (the first and the last always among them)."""
+    values = np.unique(np.asarray(values, dtype=float))
+    if values.size <= count:
+        return values
+    return values[np.unique(np.linspace(0, values.size - 1, count).round().astype(int))]
+
+
+def is_large_gonio_set(rows, threshold=GONIO_LARGE_GEOMETRIES):
+    """Whether a value table has more than ``threshold`` BRDF geometries (over all samples)."""
+    return gonio_values(rows)["index"].size > threshold
+
+
+def mirror_distance_class(distance_deg, bins=MIRROR_DISTANCE_BINS_DEG):
+    """The label of the distance-from-the-mirror class of each angle [deg] (e.g. ``"2-10°"``)."""
+    labels = mirror_distance_labels(bins)
+    classes = np.clip(np.searchsorted(np.asarray(bins[1:-1]), distance_deg, side="right"), 0, len(labels) - 1)
+    return [labels[c] for c in np.atleast_1d(classes)]
+
+
+def mirror_distance_labels(bins=MIRROR_DISTANCE_BINS_DEG):
+    """Labels of the distance-from-the-mirror classes: ``< 2°``, ``2-10°``, ..., ``>= 30°``."""
+    labels = []
+    for k, (low, high) in enumerate(zip(bins[:-1], bins[1:])):
+        if k == 0:
+            labels.append(f"< {high:g}°")
+        elif not np.isfinite(high):
+            labels.append(f">= {low:g}°")
+        else:
+            labels.append(f"{low:g}-{high:g}°")
+    return labels
+
+
+def gonio_residual_summary(residuals, bins=MIRROR_DISTANCE_BINS_DEG):
+    """Relative residuals of the BRDF values and their median magnitude per band and class.
+
+    The relative residual is ``(measured - fitted) / fitted`` with ``fitted`` the posterior
+    median of the noise-free prediction.
+
+    Parameters
+    ----------
+    residuals : dict
+        :func:`residuals_in_eps` (its ``predicted_draws`` and ``rows``).
+    bins : sequence of float
+        Edges of the distance-from-the-mirror classes [deg].
+
+    Returns
+    -------
+    dict
+        ``geometry`` (:func:`gonio_values`), ``fitted_median``, ``fitted_q05``, ``fitted_q95``,
+        ``measured`` and ``relative`` (n_wavelengths, n_brdf_values); ``classes`` (labels),
+        ``count`` (geometries per class), ``median_abs_all`` (n_wavelengths,) and
+        ``median_abs_by_class`` (n_wavelengths, n_classes; NaN for an empty class).
+    """
+    geometry = gonio_values(residuals["rows"])
+    index = geometry["index"]
+    draws = np.asarray(residuals["predicted_draws"])[..., index]
+    median = np.median(draws, axis=0)
+    q05, q95 = np.quantile(draws, [0.05, 0.95], axis=0)
+    measured = np.asarray(residuals["observed"])[:, index]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        relative = (measured - median) / median
+    magnitude = np.abs(relative)
+    labels = mirror_distance_labels(bins)
+    classes = np.clip(np.searchsorted(np.asarray(bins[1:-1]), geometry["mirror_distance_deg"], side="right"),
+                      0, len(labels) - 1)
+    by_class = np.full((magnitude.shape[0], len(labels)), np.nan)
+    count = []
+    for c in range(len(labels)):
+        member = classes == c
+        count.append(int(member.sum()))
+        if member.any():
+            by_class[:, c] = np.nanmedian(magnitude[:, member], axis=1)
+    return {"geometry": geometry, "fitted_median": median, "fitted_q05": q05, "fitted_q95": q95,
+            "measured": measured, "relative": relative, "classes": labels, "count": count,
+            "median_abs_all": np.nanmedian(magnitude, axis=1) if index.size else np.full(magnitude.shape[0], np.nan),
+            "median_abs_by_class": by_class}

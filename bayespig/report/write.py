@@ -19,6 +19,13 @@ measurement file, inferred first) and writes into ``out_dir``:
     their prior, :func:`~bayespig.report.quantities.prior_edges`), predicted films,
     diagnostics and provenance.
 
+``fit_by_geometry.csv`` and ``colour_by_geometry.csv``
+    Only for sets of more than :data:`~bayespig.report.quantities.GONIO_LARGE_GEOMETRIES` BRDF
+    geometries (gonio measurements), whose report shows the fit in the plane of incidence, as a
+    residual map over viewing directions and as residual statistics by distance from the
+    mirror direction instead of a table row per geometry: every geometry's angles, distance
+    from the mirror, residuals and colour.
+
 A posterior of opaque films only (no ``tau``) gets the same report without what needs ``tau``
 (its bands and columns, extinction, the ravine, films other than the opaque one), and says why
 (:data:`OPAQUE_ONLY_TEXT`).
@@ -364,7 +371,7 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     synthetic = _synthetic_label(measurements)
     source = getattr(measurements, "source", None) if measurements is not None else None
     title = title or f"bayespig uncertainty report: {Path(str(source)).name if source else 'pigment'}"
-    blocks, pngs, summary = [], {}, {}
+    blocks, pngs, summary, extra = [], {}, {}, {}
 
     def add_figure(name, fig, caption):
         pngs[name] = figs.to_png(fig)
@@ -409,7 +416,7 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     film_lines = []
     for f in problem.films:
         substrate = "opaque" if f.opaque else f"r_s median {_fmt(float(np.median(f.r_s)))}"
-        geometry = ", ".join(f.instrument.labels) if f.instrument else "specular transmittance"
+        geometry = _geometry_text(f.instrument) if f.instrument else "specular transmittance"
         film_lines.append(f"{f.name} ({substrate}; {geometry})")
     eps_info = q.eps_origin(idata, measurements)
     eps_text = eps_info["text"]
@@ -612,22 +619,27 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     blocks.append(doc.heading("Fit quality"))
     residuals = q.residuals_in_eps(idata, max_draws=max_colour_draws)
     samples_measured = list(dict.fromkeys(r["sample"] for r in residuals["rows"]))
-    add_figure("fit", figs.fit_figure(wl, residuals, samples_measured,
-                                      [q.measurement_kind(r) for r in residuals["rows"]]),
-               "Measured values (dots) and the posterior predictive (noise-free model) mean and 90 % "
-               "band (lines), per sample and geometry.")
-    add_figure("residuals", figs.residual_figure(wl, residuals, samples_measured),
-               "Residuals in units of the relative error eps: (measured - predicted) / (eps predicted). "
-               "Under the noise model (eq. 7) they scatter like a standard normal; grey bands at "
-               "+-1, 2, 3.")
+    large_gonio = q.is_large_gonio_set(residuals["rows"])
     fit_rows = []
     for k, r in enumerate(residuals["rows"]):
         z = residuals["z"][:, k]
         fit_rows.append({"sample": r["sample"], "channel": r["channel"],
                          "rms_z": float(np.sqrt(np.nanmean(z * z))), "max_abs_z": float(np.nanmax(np.abs(z)))})
-    blocks.append(doc.table(["sample", "geometry", "rms residual [eps]", "max |residual| [eps]"],
-                            [[f["sample"], f["channel"], _fmt(f["rms_z"]), _fmt(f["max_abs_z"])]
-                             for f in fit_rows]))
+    gonio_summary, mirror_class = None, {}
+    if large_gonio:
+        gonio_summary, mirror_class = _gonio_fit_blocks(wl, residuals, fit_rows, blocks, add_figure, extra)
+    else:
+        add_figure("fit", figs.fit_figure(wl, residuals, samples_measured,
+                                          [q.measurement_kind(r) for r in residuals["rows"]]),
+                   "Measured values (dots) and the posterior predictive (noise-free model) mean and 90 % "
+                   "band (lines), per sample and geometry.")
+        add_figure("residuals", figs.residual_figure(wl, residuals, samples_measured),
+                   "Residuals in units of the relative error eps: (measured - predicted) / (eps predicted). "
+                   "Under the noise model (eq. 7) they scatter like a standard normal; grey bands at "
+                   "+-1, 2, 3.")
+        blocks.append(doc.table(["sample", "geometry", "rms residual [eps]", "max |residual| [eps]"],
+                                [[f["sample"], f["channel"], _fmt(f["rms_z"]), _fmt(f["max_abs_z"])]
+                                 for f in fit_rows]))
     inferred_eps = "eps" in idata.posterior
     blocks.append(doc.paragraph(
         "Posterior predictive check per wavelength: the discrepancy is the chi-square of the noise model, "
@@ -670,21 +682,30 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         measured = q.measured_colour(idata, observer=observer, illuminant=illuminant,
                                      max_draws=max_colour_draws, residuals=residuals)
         blocks.append(doc.heading("Measured samples", 3))
-        blocks.append(doc.table(
-            ["sample", "geometry", "L* a* b* measured", "L* a* b* predicted", "dE00 meas-pred",
-             "dE00 spread (95 %)"],
-            [[m["sample"], m["channel"], _lab(m["Lab_measured"]), _lab(m["Lab_predicted"]),
-              _fmt(m["dE00_measured_predicted"], 2), _fmt(m["dE00_spread"], 2)] for m in measured]))
-        add_figure("colour_measured", figs.swatch_figure(
-            [{"label": f"{m['sample']} {m['channel']}", "colours": [m["sRGB_measured"], m["sRGB_predicted"]],
-              "text": f"dE00 {m['dE00_measured_predicted']:.2f}, spread {m['dE00_spread']:.2f}"}
-             for m in measured], title="measured (left) and predicted (right), sRGB for display"),
-            "Colour of every measured sample and geometry: measured and predicted (posterior mean).")
+        if large_gonio:
+            _gonio_colour_blocks(measured, mirror_class, blocks, extra)
+        else:
+            blocks.append(doc.table(
+                ["sample", "geometry", "L* a* b* measured", "L* a* b* predicted", "dE00 meas-pred",
+                 "dE00 spread (95 %)"],
+                [[m["sample"], m["channel"], _lab(m["Lab_measured"]), _lab(m["Lab_predicted"]),
+                  _fmt(m["dE00_measured_predicted"], 2), _fmt(m["dE00_spread"], 2)] for m in measured]))
+            add_figure("colour_measured", figs.swatch_figure(
+                [{"label": f"{m['sample']} {m['channel']}", "colours": [m["sRGB_measured"], m["sRGB_predicted"]],
+                  "text": f"dE00 {m['dE00_measured_predicted']:.2f}, spread {m['dE00_spread']:.2f}"}
+                 for m in measured], title="measured (left) and predicted (right), sRGB for display"),
+                "Colour of every measured sample and geometry: measured and predicted (posterior mean).")
         films = list(films) if films is not None else q.default_unmeasured_films(problem)
         predicted = q.film_colour(idata, films, observer=observer, illuminant=illuminant,
-                                  max_draws=max_colour_draws)
+                                  max_draws=max_colour_draws,
+                                  instrument=_colour_instrument(problem) if large_gonio else None)
         blocks.append(doc.heading("Predicted films", 3))
         instrument_labels = list(dict.fromkeys(p["channel"] for p in predicted))
+        if large_gonio:
+            blocks.append(doc.paragraph(
+                f"Predicted at {len(instrument_labels)} of the measured geometries (in the plane of incidence, "
+                "nearest 45° incidence, at aspecular angles near "
+                + ", ".join(f"{a:g}" for a in GONIO_COLOUR_ASPECULARS_DEG) + "°)."))
         if has_tau:
             blocks.append(doc.paragraph(
                 "Colour of films made with this pigment that were not measured, predicted from the "
@@ -746,7 +767,7 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     blocks.append(doc.heading("Priors, settings and provenance"))
     blocks.append(doc.bullets([f"{k}: {v}" if k != "tau" or has_tau else
                                "tau: not a parameter (every film is opaque)" for k, v in priors.describe().items()]))
-    prov_text = json.dumps(_jsonable(prov), indent=2, sort_keys=True, default=str)
+    prov_text = json.dumps(_jsonable(_shown_provenance(prov)), indent=2, sort_keys=True, default=str)
     blocks.append(doc.preformatted(prov_text))
     created = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     from .. import __version__
@@ -760,6 +781,7 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         "truth": truth, "extinction": extinction,
         "diagnostics": {k: diag[k] for k in ("ess", "rhat", "flags", "n_chains", "n_draws", "rhat_max", "ess_min")},
         "fit_quality": fit_rows,
+        "gonio_residuals": gonio_summary,
         "model_check": {"level": check["level"], "p_value": check["p_value"], "misfit": misfit},
         "prior_edge": edges,
         "substrate_factors": factors,
@@ -769,7 +791,163 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     csv_text = summary_table.summary_csv(idata, measurements=measurements, check=check, diagnostics=diag,
                                          edges=edges)
     return {"blocks": blocks, "figures": pngs, "summary": _jsonable(summary), "csv": csv_text,
-            "title": title}
+            "title": title, "extra": extra}
+
+
+#: Incidence angles shown in the gonio figures (spread over those measured), at most.
+GONIO_MAX_INCIDENCES = 6
+#: Bands shown in the plane-of-incidence figure (spread over the spectrum), at most.
+GONIO_PLANE_BANDS = 3
+#: Viewing directions of the predicted films' colour for large gonio sets: aspecular angles
+#: [deg] in the plane of incidence at the measured incidence nearest 45 deg.
+GONIO_COLOUR_ASPECULARS_DEG = (15.0, 45.0, 110.0)
+#: What the report says of a large gonio set before its summary.
+GONIO_LARGE_TEXT = (
+    "Relative residual (measured - fitted) / fitted, with fitted the posterior median of the noise-free "
+    "model; median of its magnitude over the BRDF geometries of each class of angular distance from the "
+    "mirror direction (the angle between the viewing direction and the mirror image of the source).")
+
+
+def _geometry_text(instrument):
+    """The geometries of a measured film in words (a count and incidences for large gonio sets)."""
+    labels = instrument.labels
+    brdf = [ch for ch in instrument.channels if ch.kind == "brdf"]
+    if len(brdf) <= q.GONIO_LARGE_GEOMETRIES:
+        return ", ".join(labels)
+    incidences = ", ".join(f"{t:g}" for t in np.unique([ch.theta_i for ch in brdf]))
+    text = f"{len(brdf)} BRDF geometries at incidence {incidences}°"
+    others = [ch.label for ch in instrument.channels if ch.kind != "brdf"]
+    return text + (" and " + ", ".join(others) if others else "")
+
+
+def _csv_text(header, rows):
+    import csv
+    import io
+
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(header)
+    writer.writerows(rows)
+    return buffer.getvalue()
+
+
+def _percent(x):
+    return "n/a" if x is None or not np.isfinite(x) else f"{100.0 * x:.1f} %"
+
+
+def _gonio_fit_blocks(wl, residuals, fit_rows, blocks, add_figure, extra):
+    """Fit quality of a large gonio set: plane-of-incidence figure, residual map, statistics."""
+    gonio = q.gonio_residual_summary(residuals)
+    geometry = gonio["geometry"]
+    in_plane = np.isfinite(geometry["signed_theta_o"])
+    incidences = q.spread_values(geometry["theta_i"][in_plane] if in_plane.any() else geometry["theta_i"],
+                              GONIO_MAX_INCIDENCES)
+    band_indices = sorted(set(np.linspace(0, wl.size - 1, min(GONIO_PLANE_BANDS, wl.size)).round().astype(int)))
+    n = geometry["index"].size
+    blocks.append(doc.paragraph(
+        f"{n} BRDF geometries: too many to list, so the fit is shown in the plane of incidence, as a map over "
+        "viewing directions and as statistics by distance from the mirror; every geometry's residuals are "
+        "in fit_by_geometry.csv."))
+    if in_plane.any():
+        add_figure("fit_plane", figs.plane_of_incidence_figure(wl, gonio, band_indices, list(incidences)),
+                   "Measured BRDF (circles) and the fit (posterior median of the noise-free model, line, with its "
+                   "90 % band) in the plane of incidence against the signed viewing angle (+ on the specular "
+                   "side, delta_phi = 180°; - on the source side, delta_phi = 0°), at "
+                   + ", ".join(f"{wl[i]:g}" for i in band_indices) + " nm; dotted: the mirror direction.")
+    map_incidences = q.spread_values(geometry["theta_i"], GONIO_MAX_INCIDENCES)
+    add_figure("residual_map", figs.residual_map_figure(gonio, list(map_incidences)),
+               "Relative residual (measured - fitted) / fitted, median over the bands, at every viewing "
+               "direction (polar angle: azimuth delta_phi from the source, 180° = specular side; radius: "
+               "viewing angle theta_o); red: the model is too dark, blue: too bright; star: the mirror "
+               "direction.")
+    blocks.append(doc.heading("Residuals by distance from the mirror", 3))
+    blocks.append(doc.paragraph(GONIO_LARGE_TEXT))
+    header = ["wavelength [nm]", f"all ({n} geometries)"] + [
+        f"{label} ({count} geometries)" for label, count in zip(gonio["classes"], gonio["count"])]
+    blocks.append(doc.table(header, [
+        [f"{w:g}", _percent(gonio["median_abs_all"][i])] + [_percent(v) for v in gonio["median_abs_by_class"][i]]
+        for i, w in enumerate(wl)]))
+    index = geometry["index"]
+    classes = q.mirror_distance_class(geometry["mirror_distance_deg"])
+    rows = []
+    for j, k in enumerate(index):
+        rows.append([fit_rows[k]["sample"], fit_rows[k]["channel"], f"{geometry['theta_i'][j]:g}",
+                     f"{geometry['theta_o'][j]:g}", f"{geometry['delta_phi'][j]:g}",
+                     f"{geometry['mirror_distance_deg'][j]:.4f}", classes[j],
+                     f"{np.nanmedian(np.abs(gonio['relative'][:, j])):.4g}",
+                     f"{fit_rows[k]['rms_z']:.4g}", f"{fit_rows[k]['max_abs_z']:.4g}"])
+    extra["fit_by_geometry.csv"] = _csv_text(
+        ["sample", "geometry", "theta_i_deg", "theta_o_deg", "delta_phi_deg", "mirror_distance_deg",
+         "mirror_distance_class", "median_abs_relative_residual", "rms_residual_eps", "max_abs_residual_eps"],
+        rows)
+    class_of = {(fit_rows[k]["sample"], fit_rows[k]["channel"]): classes[j] for j, k in enumerate(index)}
+    return {"classes": gonio["classes"], "count": gonio["count"], "median_abs_all": gonio["median_abs_all"],
+            "median_abs_by_class": gonio["median_abs_by_class"], "incidences_deg": list(incidences),
+            "bands_nm": [float(wl[i]) for i in band_indices]}, class_of
+
+
+def _gonio_colour_blocks(measured, class_of, blocks, extra):
+    """The measured colour of a large gonio set: statistics by distance from the mirror, CSV per geometry."""
+    labels = q.mirror_distance_labels()
+    rows = []
+    for label in labels + ["other geometries"]:
+        members = [m for m in measured if class_of.get((m["sample"], m["channel"]), "other geometries") == label]
+        if not members:
+            continue
+        delta = np.array([m["dE00_measured_predicted"] for m in members], dtype=float)
+        spread = np.array([m["dE00_spread"] for m in members], dtype=float)
+        rows.append([label, str(len(members)), _fmt(float(np.median(delta)), 2), _fmt(float(delta.max()), 2),
+                     _fmt(float(spread.max()), 2)])
+    blocks.append(doc.paragraph(
+        f"{len(measured)} measured geometries, summarised by distance from the mirror direction; every "
+        "geometry's colour is in colour_by_geometry.csv."))
+    blocks.append(doc.table(["distance from the mirror", "geometries", "median dE00 meas-pred",
+                             "max dE00 meas-pred", "max dE00 spread (95 %)"], rows))
+    extra["colour_by_geometry.csv"] = _csv_text(
+        ["sample", "geometry", "mirror_distance_class", "L_measured", "a_measured", "b_measured", "L_predicted",
+         "a_predicted", "b_predicted", "dE00_measured_predicted", "dE00_spread"],
+        [[m["sample"], m["channel"], class_of.get((m["sample"], m["channel"]), "")]
+         + [f"{v:.4g}" for v in np.asarray(m["Lab_measured"]).ravel()]
+         + [f"{v:.4g}" for v in np.asarray(m["Lab_predicted"]).ravel()]
+         + [f"{m['dE00_measured_predicted']:.4g}", f"{m['dE00_spread']:.4g}"] for m in measured])
+
+
+def _colour_instrument(problem):
+    """A few in-plane channels of the measured gonio instrument for the predicted films' colour."""
+    from ..instruments import Instrument
+    from ..selection import mirror_distance_deg
+
+    reference = next(f.instrument for f in problem.films if f.instrument is not None)
+    channels = [ch for ch in reference.channels if ch.kind == "brdf"]
+    theta_i = min({ch.theta_i for ch in channels}, key=lambda t: abs(t - 45.0))
+    candidates = [ch for ch in channels if ch.theta_i == theta_i]
+    in_plane = [ch for ch in candidates if np.isclose(np.mod(ch.delta_phi, 180.0), 0.0)
+                or np.isclose(np.mod(ch.delta_phi, 180.0), 180.0)]
+    candidates = in_plane or candidates
+    distance = mirror_distance_deg([ch.theta_i for ch in candidates], [ch.theta_o for ch in candidates],
+                                   [ch.delta_phi for ch in candidates])
+    chosen = []
+    for target in GONIO_COLOUR_ASPECULARS_DEG:
+        k = int(np.argmin(np.abs(distance - target)))
+        if candidates[k] not in chosen:
+            chosen.append(candidates[k])
+    return Instrument(f"{reference.name} (a few geometries)", tuple(chosen), reference.n)
+
+
+def _shown_provenance(prov):
+    """The provenance as the report prints it: an instrument of more than
+    :data:`~bayespig.report.quantities.GONIO_LARGE_GEOMETRIES` geometries as their count
+    (``summary.json`` and ``posterior.nc`` keep every label)."""
+    instruments = prov.get("instruments")
+    if not isinstance(instruments, dict):
+        return prov
+    shown = {}
+    for name, labels in instruments.items():
+        if isinstance(labels, (list, tuple)) and len(labels) > q.GONIO_LARGE_GEOMETRIES:
+            shown[name] = f"{len(labels)} geometries (listed in summary.json and fit_by_geometry.csv)"
+        else:
+            shown[name] = labels
+    return {**prov, "instruments": shown}
 
 
 def _phase_text(idata, prov):
@@ -807,6 +985,7 @@ def _write_files(out_dir, content, idata, extra_files):
     contents = {f"figures/{name}.png": png for name, png in content["figures"].items()}
     if idata is not None:
         contents["posterior.nc"] = lambda path: _save_netcdf(idata, path)
+    contents.update(content.get("extra", {}))
     contents.update(extra_files)
     contents["summary.csv"] = content["csv"]
     summary = dict(content["summary"])
