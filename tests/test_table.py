@@ -54,7 +54,8 @@ from bayespig.table import (
 # Sandybridge kernels (OPENBLAS_CORETYPE); they agree to two digits on every kernel.
 #: Interpolated vs direct values over the whole domain (issue 3: 2e-4 relative, max). Measured
 #: 9.4e-5 (multi-angle-45), an interpolation error of the default table (the same on every
-#: kernel). Margin 2.1x: a denser table is the way to more.
+#: kernel): below the first tau node, linear towards tau -> 0 (2.75e-5 above it; log2_tau_min
+#: = -11 would make it 2.75e-5 for ~6 % build time, reports/benchmarks.md). Margin 2.1x.
 INTERPOLATION_REL_TOL = 2e-4
 #: The coarse g table of the default run (6 g nodes over 0.6, 12 a nodes, 2 tau nodes per
 #: octave; ~1e-2 seen) against the solver: a guard against gross errors, not an accuracy
