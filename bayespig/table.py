@@ -13,7 +13,8 @@ substrate albedo ``r_s`` — a scalar or one per wavelength — is exact::
 stencils: cubic over ``v(a) ~ asinh(s sqrt(a))`` and ``log(tau)``, quintic over
 ``w = atanh(g)`` (see :class:`TableSettings`). Below ``tau_min`` the values are
 linear in ``tau`` towards the exact ``tau -> 0`` slice; ``tau = inf`` (opaque,
-eq. 2) is a slice of its own.
+eq. 2) is a slice of its own, the direct solver's discrete-ordinate solution of the
+semi-infinite layer (exact down to ``a = 0``).
 
 The ``tau`` axis is geometric so that one doubling sequence per base thickness
 yields every node (adding–doubling produces ``R(2^k d)`` for free).
@@ -49,14 +50,17 @@ from ._atomic import atomic_path
 from ._validation import broadcast, choice, integer, real_array, real_scalar
 from .instruments import Instrument, channel_directions, get_instrument
 from .physics.adding_doubling import (
-    MAX_OPAQUE_DOUBLINGS,
-    OPAQUE_TRANSMITTANCE,
     START_THICKNESS,
     START_THICKNESS_HIGHER_MODES,
     double,
     start_layer,
 )
-from .physics.forward import surface_geometry, surface_mode, validate_layer_arguments
+from .physics.forward import (
+    surface_geometry,
+    surface_mode,
+    surface_mode_eigen,
+    validate_layer_arguments,
+)
 from .physics.fresnel import fresnel_reflectance
 from .physics.phase import normalise_on_quadrature, phase_fourier_modes
 from .physics.quadrature import DEFAULT_QUADRATURE_POINTS
@@ -71,8 +75,9 @@ __all__ = [
     "load_table",
 ]
 
-#: Bump when the file layout or the tabulated quantities change.
-FORMAT_VERSION = 2
+#: Bump when the file layout or the tabulated quantities change (3: the opaque slice from the
+#: discrete-ordinate solution, no longer doubled).
+FORMAT_VERSION = 3
 #: Smallest value kept before taking logarithms (far below any visible contribution).
 LOG_FLOOR = 1e-300
 #: Largest a evaluated on the a = 1 node (q is a limit there) [-].
@@ -256,7 +261,10 @@ def _build_g_slice(instrument, settings, g):
     The tau index runs: 0 -> tau = 0 limit, 1..n_tau -> ``settings.tau_nodes``, last -> opaque.
 
     Work shared between nodes: ``per_octave`` doubling chains produce every finite ``tau``
-    node (doubling gives ``R(2^k d)`` for free); chain 0 continues into the opaque limit;
+    node (doubling gives ``R(2^k d)`` for free); the opaque slice is the direct solver's
+    discrete-ordinate solution of the semi-infinite layer under its surface
+    (:func:`~bayespig.physics.forward.surface_mode_eigen`, exact down to ``a = 0``, where
+    doubling's spurious absorption would cost ~1e-5 of the conservative reflectance);
     in azimuthal modes m >= 1 rows that no longer transmit stop doubling, and a-nodes whose
     channel values have converged (mode contributions below ``MODE_TOLERANCE`` of the
     sum, twice in a row, at every tau) leave the Fourier sum. Every decision is per
@@ -285,14 +293,15 @@ def _build_g_slice(instrument, settings, g):
     rows = np.arange(n_a)  # a-nodes still summing modes
     for m in range(max_modes):
         start = settings.start_thickness if m == 0 else max(settings.start_thickness, START_THICKNESS_HIGHER_MODES)
-        # mode 0 doubles exactly as the direct solver does (the conservative opaque limit is so
-        # ill-conditioned that other rounding shows at 1e-5); modes m >= 1 skip the zero weights
+        # mode 0 doubles exactly as the direct solver's doubling path does (finite weakly
+        # absorbing layers); modes m >= 1 skip the zero weights
         q = mu.size if m == 0 else n_weighted
         B = rows.size
-        R_all = np.empty((B, n_tau + 2, mu.size, mu.size))
+        # the finite columns: tau -> 0 and the tau nodes (the opaque one is solved below)
+        R_all = np.empty((B, n_tau + 1, mu.size, mu.size))
         # modes m >= 1 enter only through R (their BRDF mode); T and direct serve mode 0's eq. (3) terms
         T_all = np.empty_like(R_all) if m == 0 else None
-        e_all = np.empty((B, n_tau + 2, mu.size)) if m == 0 else None
+        e_all = np.empty((B, n_tau + 1, mu.size)) if m == 0 else None
         R_zero, T_zero, e_zero = start_layer(mu, c, albedo[rows], np.full(B, TAU_ZERO_EVAL), p_refl[m], p_trans[m])
         R_all[:, 0] = R_zero
         if m == 0:
@@ -303,22 +312,16 @@ def _build_g_slice(instrument, settings, g):
             R, T, e = start_layer(mu, c, albedo[rows], np.full(B, base / 2.0**k0), p_refl[m], p_trans[m])
             for _ in range(k0):
                 R, T, e = _double(R, T, e, c, q)
-            # chain p = 0 starts at the start thickness itself, as the opaque limit does:
-            # it continues past the last node into the opaque slice
-            R, T, e = _doubling_chain(R, T, e, c, q, R_all, T_all, e_all, range(1 + p, 1 + n_tau, P),
-                                      saturate=m > 0)
-            if p == 0:
-                R_all[:, -1] = _opaque_limit(R, T, e, c, q, k0 + (n_tau - 1) // P, saturate=m > 0)
-        flat = (B * (n_tau + 2), mu.size)
-        if m == 0:
-            T_all[:, -1] = 0.0
-            e_all[:, -1] = 0.0
-            mode = surface_mode(geometry, R_all.reshape(flat + (mu.size,)), T_all.reshape(flat + (mu.size,)),
-                                e_all.reshape(flat), True)
-            f_mode = mode.pop("f_mode")
-        else:
-            f_mode = surface_mode(geometry, R_all.reshape(flat + (mu.size,)), None, None, False)["f_mode"]
-        f_mode = f_mode.reshape(B, n_tau + 2, theta_out.size, theta_in.size)
+            _doubling_chain(R, T, e, c, q, R_all, T_all, e_all, range(1 + p, 1 + n_tau, P), saturate=m > 0)
+        flat = (B * (n_tau + 1), mu.size)
+        finite = surface_mode(geometry, R_all.reshape(flat + (mu.size,)),
+                              None if T_all is None else T_all.reshape(flat + (mu.size,)),
+                              None if e_all is None else e_all.reshape(flat), m == 0)
+        opaque = surface_mode_eigen(geometry, a[rows], np.full(B, np.inf), p_refl[m], p_trans[m], m == 0, start)
+        # every term with the opaque slice as the last tau column: (B, n_tau + 2, ...)
+        mode = {key: np.concatenate([finite[key].reshape((B, n_tau + 1) + opaque[key].shape[1:]),
+                                     opaque[key][:, None]], axis=1) for key in finite}
+        f_mode = mode.pop("f_mode")
         weight_m = (2.0 - (m == 0)) * (-1.0) ** m
         contribution = np.empty((B, n_tau + 2, K))
         for k, ch in enumerate(instrument.channels):
@@ -411,28 +414,6 @@ def _doubling_chain(R, T, e, c, q, R_all, T_all, e_all, columns, saturate):
         if T_all is not None:
             T_all[:, column], e_all[:, column] = T, e
     return R, T, e
-
-
-def _opaque_limit(R, T, e, c, q, doublings, saturate):
-    """``R`` of the opaque layer (eq. 2): double the chain's last layer until nothing leaks.
-
-    The criterion is that of :func:`~bayespig.physics.adding_doubling.layer_mode`
-    (``OPAQUE_TRANSMITTANCE``), checked per row; ``doublings`` already done count
-    towards ``MAX_OPAQUE_DOUBLINGS``.
-    """
-    R = R.copy()
-    active = np.flatnonzero(_transmitted(T, e, c) >= OPAQUE_TRANSMITTANCE)
-    if saturate:
-        active = active[_transmitted(T[active], e[active], c) >= SATURATED_TRANSMITTANCE]
-    R_a, T_a, e_a = R[active], T[active], e[active]
-    for _ in range(MAX_OPAQUE_DOUBLINGS - doublings):
-        if not active.size:
-            break
-        R_a, T_a, e_a = _double(R_a, T_a, e_a, c, q)
-        R[active] = R_a
-        keep = _transmitted(T_a, e_a, c) >= OPAQUE_TRANSMITTANCE
-        active, R_a, T_a, e_a = active[keep], R_a[keep], T_a[keep], e_a[keep]
-    return R
 
 
 def _slice_cost(g):
