@@ -100,3 +100,41 @@ def test_the_joint_sampler_runs_any_list_of_specs(film):
     # sd of a sample sd ~ sd / sqrt(2 n_eff)
     assert abs(draws.std() / prior.std() - 1.0) < MC_Z / np.sqrt(2.0 * ess)
     assert float(az.rhat(draws)) < 1.01
+
+
+def test_residual_coordinates_invert_and_the_regression_recovers_a_linear_dependence(film):
+    """u_of inverts theta_of; over points with theta exactly linear in phi the regression's
+    centre and sensitivity are that line, and r is then zero."""
+    ms, problem, model = film
+    cards, index = card_indices(ms, problem)
+    post = CardFactorLogPosterior(model, index, np.array([[0.3, 0.0], [0.1, 0.4]]), Priors(), EPS, 0.1, cards)
+    rng = np.random.default_rng(7)
+    u = np.concatenate([rng.normal(0, 0.01, (20, 4)), rng.normal(0, 0.05, (20, 2))], axis=1)
+    np.testing.assert_allclose(post.u_of(*post.theta_of(u)), u, atol=1e-14)
+    centre = np.array([0.25, 0.05, 0.12, 0.3])  # [a (2 wl), log tau (2 wl)]
+    slope = rng.normal(0, 1.0, (4, 2))
+    phi = rng.normal(0, 0.05, (50, 2))
+    points = post.u_of(centre + phi @ slope.T, phi)
+    theta_hat, sensitivity = post.regression(points)
+    np.testing.assert_allclose(theta_hat, [[0.25, 0.12], [0.05, 0.3]], atol=1e-12)
+    np.testing.assert_allclose(sensitivity, slope, atol=1e-10)
+    refit = JointLogPosterior(model, theta_hat, post.specs, Priors(), EPS, sensitivity=sensitivity)
+    np.testing.assert_allclose(refit.u_of(centre + phi @ slope.T, phi)[:, :4], 0.0, atol=1e-12)
+    with pytest.raises(ValueError, match=r"sensitivity must have shape \(4, 2\)"):
+        JointLogPosterior(model, theta_hat, post.specs, Priors(), EPS, sensitivity=sensitivity[:2])
+
+
+def test_the_dense_check_completes_a_many_parameter_run_the_stored_draws_cannot():
+    """94 parameters of independent draws (a Revigo film's joint run has 31 * 3 + 2): on the
+    128 stored draws per chain R-hat <= 1.01 and ESS >= 400 fail by chance for some parameter at
+    every check (so such runs went to max_steps); checked on the thinned chain they pass."""
+    from bayespig.inference.sampler import _run_verdict
+
+    settings = InferenceSettings(target_ess=400, draws_per_chain=128)
+    steps = 2000
+    chain = np.random.default_rng(0).standard_normal((steps, settings.n_ensembles * settings.n_walkers, 94))
+    log_prob = -0.5 * (chain ** 2).sum(axis=2)
+    assert isinstance(_run_verdict(chain, log_prob, settings, steps), int)  # not complete: check again later
+    done = _run_verdict(chain, log_prob, settings, steps, dense_check=True)
+    assert isinstance(done, dict) and not done["max_steps_reached"]
+    assert done["theta"].shape == (settings.n_ensembles, 128, 94)
