@@ -2,7 +2,8 @@
 
 Run from the repository root::
 
-    python benchmarks/substrate_factors.py              # ~3 minutes; rewrites its section of reports/benchmarks.md
+    python benchmarks/substrate_factors.py              # ~10 minutes; rewrites its section of reports/benchmarks.md
+    python benchmarks/substrate_factors.py --revigo-only  # the Revigo films only, print only
     python benchmarks/substrate_factors.py --no-write   # print only
 
 A method-4 film over a black and a white card is simulated on the 8°/d SCE sphere and on the
