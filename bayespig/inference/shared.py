@@ -123,9 +123,9 @@ __all__ = [
 #: change of coordinates with unit Jacobian); this one only sets how well the shared moves mix.
 SENSITIVITY_DAMPING = 1e-3
 #: Share of whole-vector DE moves among the block moves of the joint run: they follow
-#: correlations between the blocks that the residual coordinates leave (measured on Revigo 07A
-#: with the regression's coordinates: without them the run is capped at 20 000 steps, white
-#: card's factor tau_int 91 steps; with 0.2 it completes in 1376 steps, tau_int 22).
+#: correlations between the blocks that the residual coordinates leave. With the regression's
+#: coordinates 0, 0.1 and 0.2 are alike within the runs' spread (Revigo 07A: 1121 steps at 0,
+#: 1376 at 0.2; 02B: 3389 at 0, 4197 at 0.1, 2514 at 0.2).
 JOINT_DE_WEIGHT = 0.2
 #: Steps of the adaptation run of :func:`sample_joint` whose draws give the blocks' sensitivity
 #: to the shared parameters by regression (and the centre ``theta_hat``); then discarded.
