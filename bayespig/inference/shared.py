@@ -19,9 +19,16 @@ at every wavelength, the forward model evaluated with the specs' inputs (:meth:`
 
 Residual coordinates
     Sampled are ``u = [r (n_wl * (1 + G)), phi]`` with ``theta = theta_hat + r + S (phi - phi_0)``:
-    ``theta_hat`` is the per-wavelength posterior median at the nominal ``phi_0`` (the pilot,
-    below) and ``S = d theta_hat / d phi`` its damped Gauss-Newton sensitivity to the shared
-    parameters (:meth:`JointLogPosterior._sensitivity`). The map is a translation for every
+    ``theta_hat`` and ``S`` are the intercept and slope of the linear regression of ``theta``
+    on ``phi`` over the draws of a short joint run (the adaptation, below), so that ``r`` is
+    uncorrelated with ``phi``; that run itself uses the per-wavelength posterior median at the
+    nominal ``phi_0`` (the pilot) and the damped Gauss-Newton sensitivity
+    ``S = d theta_hat / d phi`` (:meth:`JointLogPosterior._sensitivity`). The damping,
+    needed where a block is a ravine, also shrinks the sensitivity along the ravine: on
+    Revigo 07A (a thick white film, ``tau`` ~ 15) it gives ``d log tau / d log f_white`` ~
+    0.01-0.05 where the regression gives 2-3, and the conditional range of ``log f_white``
+    given ``r`` was 0.002-0.005 against the marginal 0.010 (0.004-0.011 with the regression:
+    the shared block moves as far as its posterior spreads). The map is a translation for every
     ``phi`` (unit Jacobian), so the density is the same in either coordinates; but a change of
     ``phi`` at fixed ``r`` moves every wavelength's ``theta`` along with it, which is what the
     data ask for. In ``u`` the wavelengths are independent given ``phi`` and only weakly coupled
@@ -31,11 +38,14 @@ Block-wise moves
     accepted on its own likelihood term (given ``phi`` the wavelengths are independent), then
     the shared block on the whole log-posterior; a share :data:`JOINT_DE_WEIGHT` of
     whole-vector DE moves follows the correlations the residual coordinates leave.
-Pilot start
+Pilot start, adaptation
     :func:`sample_joint` takes a per-wavelength run at ``phi = phi_0`` (the usual
     :func:`bayespig.inference.infer_problem`), uses its medians as ``theta_hat``, and starts the
     walkers on its draws (picked independently per wavelength) with ``phi`` in a small ball
-    around ``phi_0``.
+    around ``phi_0``. A joint run of :data:`ADAPTATION_STEPS` steps from there gives the
+    regression's ``theta_hat`` and ``S``; the run proper starts on its last walkers (the same
+    physical points in the new coordinates). Any fixed ``S`` leaves the target invariant; the
+    adaptation's draws are not kept.
 Run length, diagnostics
     Those of the per-wavelength runs (:func:`bayespig.inference.sampler._sample_stack`) on the
     joint vector, one vectorised table call per half-step for every wavelength of every walker.
@@ -97,6 +107,7 @@ from .moves import IndependentEnsemblesMove, ensemble_halves
 from .sampler import _sample_stack
 
 __all__ = [
+    "ADAPTATION_STEPS",
     "JOINT_DE_WEIGHT",
     "SENSITIVITY_DAMPING",
     "BlockwiseMove",
@@ -112,8 +123,13 @@ __all__ = [
 #: change of coordinates with unit Jacobian); this one only sets how well the shared moves mix.
 SENSITIVITY_DAMPING = 1e-3
 #: Share of whole-vector DE moves among the block moves of the joint run: they follow
-#: correlations between the blocks that the residual coordinates leave.
+#: correlations between the blocks that the residual coordinates leave. With the regression's
+#: coordinates 0, 0.1 and 0.2 are alike within the runs' spread (Revigo 07A: 1121 steps at 0,
+#: 1376 at 0.2; 02B: 3389 at 0, 4197 at 0.1, 2514 at 0.2).
 JOINT_DE_WEIGHT = 0.2
+#: Steps of the adaptation run of :func:`sample_joint` whose draws give the blocks' sensitivity
+#: to the shared parameters by regression (and the centre ``theta_hat``); then discarded.
+ADAPTATION_STEPS = 300
 
 
 class SharedParameter:
@@ -192,9 +208,13 @@ class JointLogPosterior:
         Ranges of ``a`` and ``tau`` (default :class:`~bayespig.likelihood.Priors`).
     eps : float
         Known relative measurement error of eq. (7) for films without their own [-].
+    sensitivity : numpy.ndarray, optional
+        ``S`` of the residual coordinates, shape (n_wavelengths * (1 + G), n_shared) in the
+        order ``[a (n_wl), log tau (n_wl * G)]``; default the damped Gauss-Newton one
+        (:meth:`_sensitivity`).
     """
 
-    def __init__(self, model, theta_hat, specs, priors=None, eps=0.01):
+    def __init__(self, model, theta_hat, specs, priors=None, eps=0.01, sensitivity=None):
         priors = Priors() if priors is None else priors
         specs = tuple(specs)
         if model.g != "isotropic":
@@ -235,7 +255,13 @@ class JointLogPosterior:
         for spec in specs:
             self.spec_slices.append(slice(start, start + spec.size))
             start += spec.size
-        self.sensitivity = self._sensitivity()  # (n_wl * (1 + G), n_shared)
+        if sensitivity is None:
+            self.sensitivity = self._sensitivity()  # (n_wl * (1 + G), n_shared)
+        else:
+            self.sensitivity = np.asarray(sensitivity, dtype=float)
+            if self.sensitivity.shape != (n_theta, self.n_shared):
+                raise ValueError(f"sensitivity must have shape {(n_theta, self.n_shared)}, "
+                                 f"got {self.sensitivity.shape}")
         # a box holding the support in u (for the sampler's start ball and straggler moves)
         reach = np.abs(self.sensitivity) @ np.maximum(np.abs(self.shared_lower - self.shared_nominal),
                                                       np.abs(self.shared_upper - self.shared_nominal))
@@ -306,6 +332,33 @@ class JointLogPosterior:
         u = np.atleast_2d(u)
         phi = u[:, self.shared_slice]
         return self.theta_hat + u[:, :self.shared_slice.start] + (phi - self.shared_nominal) @ self.sensitivity.T, phi
+
+    def u_of(self, theta, phi):
+        """The inverse of :meth:`theta_of`: ``u`` from ``theta`` (W, n_wl * (1 + G)) and ``phi`` (W, n_shared)."""
+        theta, phi = np.atleast_2d(theta), np.atleast_2d(phi)
+        return np.concatenate([theta - self.theta_hat - (phi - self.shared_nominal) @ self.sensitivity.T, phi],
+                              axis=1)
+
+    def regression(self, u):
+        """Centre and sensitivity of the residual coordinates that make ``r`` uncorrelated with ``phi`` over ``u``.
+
+        The least-squares fit ``theta = theta_hat + S (phi - phi_0)`` over the points ``u``
+        (W, n_dim), e.g. draws of this posterior.
+
+        Returns
+        -------
+        tuple
+            ``(theta_hat (n_wl, 1 + G), S (n_wl * (1 + G), n_shared))``, the arguments of a
+            new :class:`JointLogPosterior`.
+        """
+        theta, phi = self.theta_of(u)
+        shift = phi - self.shared_nominal
+        design = np.concatenate([np.ones((shift.shape[0], 1)), shift - shift.mean(axis=0)], axis=1)
+        coef = np.linalg.lstsq(design, theta, rcond=None)[0]
+        slope = coef[1:].T  # (n_theta, n_shared)
+        centre = coef[0] - slope @ shift.mean(axis=0)
+        n_wl, G = self.n_wavelengths, self.n_groups
+        return np.concatenate([centre[:n_wl, None], centre[n_wl:].reshape(n_wl, G)], axis=1), slope
 
     def unpack(self, u):
         """``a`` (W, n_wl), ``tau`` (W, n_wl, G), then each spec's physical values (W, size)."""
@@ -395,6 +448,19 @@ class BlockwiseMove:
         self.log_post = log_post
         self.n_ensembles = int(n_ensembles)
         self.frozen = None  # the interface of IndependentEnsemblesMove (one member: never frozen)
+        # every walker's coordinates and wavelength terms at the end of the last update: the
+        # terms of a walker no other move has changed since are not evaluated again
+        self._coords = self._terms = None
+
+    def _current_terms(self, current, index):
+        """Wavelength terms of the walkers ``index`` at ``current``, from the cache where it holds them."""
+        if self._coords is None:
+            return self.log_post.wavelength_terms(current)
+        terms = self._terms[index].copy()
+        stale = ~(self._coords[index] == current).all(axis=1)
+        if stale.any():
+            terms[stale] = self.log_post.wavelength_terms(current[stale])
+        return terms
 
     def tune(self, state, accepted):
         """No tuning (emcee's interface)."""
@@ -429,7 +495,7 @@ class BlockwiseMove:
             q = current.copy()
             step = self._de_step(s, c, lp.blocks, random).reshape(index.size, *lp.blocks.shape)
             q[:, lp.blocks] += step
-            old_terms, new_terms = lp.wavelength_terms(current), lp.wavelength_terms(q)
+            old_terms, new_terms = self._current_terms(current, index), lp.wavelength_terms(q)
             with np.errstate(invalid="ignore"):
                 take = new_terms - old_terms > np.log(random.rand(*new_terms.shape))
             moved = current.copy()
@@ -440,13 +506,19 @@ class BlockwiseMove:
             q = moved.copy()
             q[:, shared_columns] += self._de_step(s, c, shared_columns[None], random).reshape(index.size, -1)
             before = lp.log_prior_shared(moved) + terms.sum(axis=1)
-            after = lp(q)
+            after_terms = lp.wavelength_terms(q)
+            after = lp.log_prior_shared(q) + after_terms.sum(axis=1)
             with np.errstate(invalid="ignore"):
                 ok = after - before > np.log(random.rand(index.size))
             moved[ok] = q[ok]
             state.coords[index] = moved
             state.log_prob[index] = np.where(ok, after, before)
             accepted[index] = ok | take.any(axis=1)
+            if self._coords is None or self._coords.shape != state.coords.shape:
+                self._coords = np.full(state.coords.shape, np.nan)
+                self._terms = np.zeros((n_total, lp.n_wavelengths))
+            self._coords[index] = moved
+            self._terms[index] = np.where(ok[:, None], after_terms, terms)
         return state, accepted
 
 
@@ -511,10 +583,25 @@ def sample_joint(model, specs, draws, priors, eps, settings, joint_seed, start_s
     spread = np.concatenate([np.asarray(s.start_sd, dtype=float) for s in joint.specs])
     start = np.concatenate([residual, rng.normal(joint.shared_nominal, spread, (n_total, joint.n_shared))], axis=1)
     start[:, joint.shared_slice] = np.clip(start[:, joint.shared_slice], joint.shared_lower, joint.shared_upper)
-    run = _sample_stack(joint, [joint], np.zeros((1, joint.n_dim)), used, [joint_seed],
-                        moves=[(BlockwiseMove(joint, used.n_ensembles), 1.0 - JOINT_DE_WEIGHT),
-                               (IndependentEnsemblesMove("de", used.n_ensembles), JOINT_DE_WEIGHT)],
-                        start_walkers=start)[0]
+    adapt_seed, joint_seed = joint_seed.spawn(2)
+
+    def run_joint(posterior, run_settings, seed, walkers):
+        return _sample_stack(posterior, [posterior], np.zeros((1, posterior.n_dim)), run_settings, [seed],
+                             moves=[(BlockwiseMove(posterior, used.n_ensembles), 1.0 - JOINT_DE_WEIGHT),
+                                    (IndependentEnsemblesMove("de", used.n_ensembles), JOINT_DE_WEIGHT)],
+                             start_walkers=walkers, dense_check=True)[0]
+
+    # adaptation: a short run whose draws give the regression's centre and sensitivity
+    adapt_steps = max(ADAPTATION_STEPS, used.steps_kept)
+    adaptation = run_joint(joint, dataclasses.replace(used, min_steps=adapt_steps, max_steps=adapt_steps,
+                                                      check_interval=adapt_steps),
+                           adapt_seed, start)
+    adapted = adaptation["theta"].reshape(-1, joint.n_dim)
+    theta_hat, sensitivity = joint.regression(adapted)
+    last = adaptation["theta"].reshape(used.n_ensembles, used.n_walkers, used.steps_kept, joint.n_dim)[:, :, -1]
+    physical_last = joint.theta_of(last.reshape(-1, joint.n_dim))
+    joint = JointLogPosterior(model, theta_hat, specs, priors, eps, sensitivity=sensitivity)
+    run = run_joint(joint, used, joint_seed, joint.u_of(*physical_last))
     theta = run.pop("theta")
     n_chains, n_draws, n_dim = theta.shape
     flat = theta.reshape(-1, n_dim)
