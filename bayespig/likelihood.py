@@ -629,7 +629,7 @@ class WavelengthModel:
         r_s_scale : numpy.ndarray, optional
             Shape (W, n_reflectance_films): factor on each reflectance film's substrate
             albedo, in problem film order (substrate albedo as a nuisance parameter, see
-            :mod:`bayespig.substrate_nuisance`); ``r_s * factor`` must stay in [0, 1].
+            :mod:`bayespig.inference.card_factors`); ``r_s * factor`` must stay in [0, 1].
         member : numpy.ndarray of int, optional
             Shape (W,): position in the stack of wavelengths of every row (required for a
             stack, None for a single wavelength).

@@ -29,7 +29,6 @@ import os
 import sys
 import time
 import warnings
-from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,6 +46,7 @@ import numpy as np
 
 from . import __version__
 from ._atomic import atomic_path
+from ._pool import local_pool, stop_pool
 from ._validation import broadcast, choice, integer, real_array, real_scalar
 from .instruments import Instrument, channel_directions, get_instrument
 from .physics.adding_doubling import (
@@ -454,7 +454,8 @@ def build_table(instrument, settings=None, *, executor=None, progress=True):
     g_nodes = settings.g_nodes
     own_executor = executor is None and g_nodes.size > 1
     if own_executor:
-        executor = ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1))
+        executor = local_pool()
+    finished = False
     try:
         if executor is None:
             slices = [_build_g_slice(instrument, settings, float(g)) for g in g_nodes]
@@ -472,9 +473,12 @@ def build_table(instrument, settings=None, *, executor=None, progress=True):
                 iterator = tqdm(futures, desc=f"building table {instrument.name}", unit="g", file=sys.stderr)
             for future in iterator:
                 slices.append(future.result())
+        finished = True
     finally:
-        if own_executor:
+        if own_executor and finished:
             executor.shutdown()
+        elif own_executor:
+            stop_pool(executor)  # Ctrl-C or an error: no waiting for the running slices
     arrays = {key: np.stack([s[key] for s in slices]) for key in slices[0]}
     return LookupTable(instrument, settings, arrays, table_key(instrument, settings))
 
@@ -988,7 +992,7 @@ def read_table(path, instrument, settings):
         # our own handle: np.load leaks the one it opens when the zip directory is damaged
         with open(path, "rb") as handle, np.load(handle, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
-    except Exception as error:  # zip/npy errors of many kinds mean one thing here
+    except Exception as error:  # noqa: BLE001 - zip/npy errors of many kinds mean one thing here
         raise CacheError(f"cached table {path} is unreadable ({type(error).__name__}: {error})") from None
     stored_key = str(arrays.pop("__key__", ""))
     stored_sum = str(arrays.pop("__checksum__", ""))

@@ -77,7 +77,7 @@ def ablation(ms, say):
     """The joint posterior sampled with whole-vector moves (no blocks), from the same start."""
     from bayespig import inference as inf
     from bayespig.likelihood import ForwardModel, Priors, Problem
-    from bayespig.substrate_nuisance import CardFactorLogPosterior, card_indices
+    from bayespig.inference.card_factors import CardFactorLogPosterior, card_indices
 
     problem = Problem.from_measurements(ms, "method4")
     model = ForwardModel(problem, "isotropic", {})

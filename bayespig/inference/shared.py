@@ -98,6 +98,7 @@ emcee's red-blue update; ter Braak (2006), differential evolution.
 
 from __future__ import annotations
 
+import abc
 import dataclasses
 
 import numpy as np
@@ -132,7 +133,7 @@ JOINT_DE_WEIGHT = 0.2
 ADAPTATION_STEPS = 300
 
 
-class SharedParameter:
+class SharedParameter(abc.ABC):
     """Interface of one kind of parameter shared by all wavelengths (a spec; see the module docstring).
 
     Subclasses set the attributes and implement the methods below.
@@ -170,21 +171,21 @@ class SharedParameter:
         """Number of sampled coordinates."""
         return len(self.labels)
 
+    @abc.abstractmethod
     def log_prior(self, x):
         """Log prior density (up to a constant) of sampled coordinates ``x`` (W, size), shape (W,)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def physical(self, x):
         """Stored physical values of ``x`` (W, size) (e.g. ``f = exp(log f)``)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def model_inputs(self, x):
         """Keyword arrays of the per-wavelength model, one row per row of ``x`` (W, size)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def describe(self):
         """The prior and the labels as a JSON-able dict (provenance)."""
-        raise NotImplementedError
 
 
 class JointLogPosterior:

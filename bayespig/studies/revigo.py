@@ -617,7 +617,7 @@ def _substrate_factor_summary(study):
     return (f"The posteriors of {len(checks)} films ({', '.join(sorted(checks))}) treat the cards as uncertain"
             + (f" (the other {fixed} take the converted cards as fixed inputs: a joint run takes minutes per film)"
                if fixed else "")
-            + f" (`bayespig.infer(..., substrate_sd={sd:g})`, `bayespig.substrate_nuisance`): r_s = f r_s,card with one factor per card and film at all "
+            + f" (`bayespig.infer(..., substrate_sd={sd:g})`, `bayespig.inference.card_factors`): r_s = f r_s,card with one factor per card and film at all "
             f"wavelengths, log f ~ N(0, {sd:g}²) (90 % prior interval [{prior_low:.3f}, {prior_high:.3f}]), "
             "sampled jointly over the wavelengths; the per-film table gives each factor's posterior. On these "
             "8°/d films the factors are weakly identified, as expected with one value per card and wavelength "

@@ -168,16 +168,6 @@ def test_cli_infer_and_report_with_card_factors(tmp_path, capsys):
     assert r"r\_s = f r\_s,card" in (tmp_path / "r" / "report.md").read_text()
 
 
-def test_the_old_module_path_still_imports():
-    """``bayespig.substrate_nuisance`` (the card factors' home before the joint machinery was
-    made general) names the same objects."""
-    import bayespig.inference.card_factors as new
-    import bayespig.substrate_nuisance as old
-
-    for name in old.__all__:
-        assert getattr(old, name) is getattr(new, name)
-
-
 def test_a_capped_joint_run_says_so():
     """A joint run stopped at max_steps warns once, naming the shared parameters."""
     import warnings
