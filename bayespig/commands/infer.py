@@ -8,7 +8,9 @@ import warnings
 
 import numpy as np
 
-from .._atomic import atomic_path
+from .._atomic import write_file_set
+from ..inference.arguments import eps_argument as eps_argument_api
+from ..likelihood import noise_floor_argument
 from ._arguments import INFER_METHODS as _METHODS
 from ._arguments import (
     METHOD_HELP,
@@ -73,29 +75,30 @@ def add_infer_parser(subparsers):
     return parser
 
 
-def eps_argument(text):
-    """``--eps`` text -> a positive number, ``"infer"`` or None (not given)."""
-    if text is None or text == "infer":
-        return text
+def _number_or_infer(text, flag, check):
+    """``text`` of ``flag`` as a number or ``"infer"`` (None when not given), checked by the
+    API's own rule ``check`` (one rule and wording for the Python call and the command line)."""
+    if text is None:
+        return None
     try:
-        value = float(text)
+        value = text if text == "infer" else float(text)
     except ValueError:
-        raise ValueError(f"--eps: expected a positive number or 'infer', got {text!r}") from None
-    if not (np.isfinite(value) and value > 0):
-        raise ValueError(f"--eps: expected a positive number or 'infer', got {text!r}")
-    return value
+        value = text
+    try:
+        return check(value)
+    except (TypeError, ValueError) as error:
+        text = str(error).replace(", 'infer' or None", " or 'infer'").replace("None (no floor), ", "")
+        raise ValueError(f"{flag}: {text.split(' ', 1)[1]}") from None  # the flag for the argument name
+
+
+def eps_argument(text):
+    """``--eps`` text -> a number in (0, 1), ``"infer"`` or None (not given)."""
+    return _number_or_infer(text, "--eps", eps_argument_api)
 
 
 def _noise_floor_argument(text):
-    if text is None or text == "infer":
-        return text
-    try:
-        value = float(text)
-    except ValueError:
-        raise ValueError(f"--noise-floor: expected a number >= 0 or 'infer', got {text!r}") from None
-    if not (np.isfinite(value) and value >= 0):
-        raise ValueError(f"--noise-floor: expected a number >= 0 or 'infer', got {text!r}")
-    return value
+    """``--noise-floor`` text -> a number > 0, ``"infer"`` or None (not given or 0)."""
+    return _number_or_infer(text, "--noise-floor", noise_floor_argument)
 
 
 def _wavelengths_argument(text):
@@ -151,14 +154,12 @@ def run_infer(args):
         print(f"bayespig: warning: {warning.message}", file=sys.stderr)
     record_eps_source(idata, eps, measurements, given_as="--eps")
     check = posterior_predictive_check(idata)
-    os.makedirs(args.out, exist_ok=True)
-    posterior_path = os.path.join(args.out, "posterior.nc")
-    summary_path = os.path.join(args.out, "summary.csv")
-    save_inference(idata, posterior_path)
     edges = prior_edges(idata)
     summary = summary_columns(idata, measurements=measurements, check=check, edges=edges)
-    with atomic_path(summary_path, suffix=".csv") as temporary:
-        temporary.write_text(columns_to_csv(summary), encoding="utf-8")
+    # both files or neither: a new posterior never sits beside an earlier run's summary
+    written = write_file_set(args.out, {"posterior.nc": lambda path: save_inference(idata, path),
+                                        "summary.csv": columns_to_csv(summary)})
+    posterior_path, summary_path = written["posterior.nc"], written["summary.csv"]
     columns = [c for c in ("a_mean", "a_sd", "tau_mean", "tau_sd", "corr_a_log_tau", "a_r_hat",
                            "tau_r_hat", "a_ess_bulk", "tau_ess_bulk") if c in summary]
     print(f"bayespig infer: {idata.posterior.attrs['method']}, g {args.g}, "

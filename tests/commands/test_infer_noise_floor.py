@@ -27,8 +27,8 @@ def _write(path, zero=False):
 
 
 @pytest.mark.parametrize("option, value, message", [
-    ("--noise-floor", "abc", "--noise-floor: expected a number >= 0 or 'infer', got 'abc'"),
-    ("--noise-floor", "-1e-3", "--noise-floor: expected a number >= 0 or 'infer', got '-1e-3'"),
+    ("--noise-floor", "abc", "--noise-floor: must be a number >= 0 (the additive noise floor in the units of the values, e.g. 0.001 for 0.001 1/sr) or 'infer', got 'abc'"),
+    ("--noise-floor", "-1e-3", "--noise-floor: must be a number >= 0 (the additive noise floor in the units of the values, e.g. 0.001 for 0.001 1/sr) or 'infer', got -0.001"),
     ("--wavelengths", "600-500", ("--wavelengths: expected a range LOW-HIGH (e.g. 420-500) or a list W1,W2,... "
                                  "[nm], got '600-500'")),
     ("--wavelengths", "500,x", ("--wavelengths: expected a range LOW-HIGH (e.g. 420-500) or a list W1,W2,... "

@@ -87,7 +87,7 @@ def test_eps_of_a_posterior_file_is_refused(demo_dir, tmp_path):
     assert str(error.value) == (
         f"--eps: {demo_dir / 'posterior.nc'} is a posterior, inferred with its own eps; --eps applies only "
         "when report infers from a measurement file (or run bayespig infer --eps)")
-    with pytest.raises(ValueError, match="^--eps: expected a positive number or 'infer', got 'x'$"):
+    with pytest.raises(ValueError, match=r"^--eps: must be a number in \(0, 1\) \(a relative error, e.g. 0.02 for 2 %\) or 'infer', got 'x'$"):
         _run(["report", str(demo_dir / "posterior.nc"), "--out", str(tmp_path / "o"), "--eps", "x"])
 
 
