@@ -14,7 +14,6 @@ from ..instruments import BUILT_IN_INSTRUMENTS, get_instrument
 from ..likelihood import method_name
 
 __all__ = [
-    "INFER_METHODS",
     "INPUT_KINDS",
     "METHOD_HELP",
     "add_film_argument",
@@ -42,9 +41,6 @@ METHOD_HELP = "1, 2, 3, 4 (or method1 .. method4)"
 INPUT_KINDS = ("a measurement file (bayespig CSV, ASTM E1392 .astm, or a wide spectral table), or a "
                "Revigo data folder containing '*spectral-data*.txt'")
 _SPECTRAL_DATA_GLOB = "*spectral-data*.txt"
-#: ``--method`` of ``infer`` and ``report``: every spelling -> the method (see ``method_name``).
-INFER_METHODS = {text: method_name(text) for text in ("1", "2", "3", "4", "method1", "method2", "method3",
-                                                      "method4", "auto", "general")}
 
 
 # ------------------------------------------------------------------------------------ outputs
@@ -158,19 +154,17 @@ def add_input_argument(parser, *flags, **kwargs):
 
 
 # ---------------------------------------------------------------------------- how much is said
-def add_verbosity_arguments(parser, *, no_progress_alias=True):
+def add_verbosity_arguments(parser):
     """``-q/--quiet`` (``args.no_progress``) and ``-v/--verbose`` (``args.verbose``).
 
     ``--quiet``: no progress output (results, warnings and errors are still printed);
     ``--verbose``: on an error, also its traceback. ``--no-progress``, the older spelling of
-    ``--quiet``, stays as a hidden alias (``no_progress_alias=False`` where the command
-    declares it itself).
+    ``--quiet``, stays as a hidden alias.
     """
     group = parser.add_mutually_exclusive_group()
     group.add_argument("-q", "--quiet", dest="no_progress", action="store_true",
                        help="no progress output (results, warnings and errors are still printed)")
-    if no_progress_alias:
-        group.add_argument("--no-progress", dest="no_progress", action="store_true", help=argparse.SUPPRESS)
+    group.add_argument("--no-progress", dest="no_progress", action="store_true", help=argparse.SUPPRESS)
     group.add_argument("-v", "--verbose", action="store_true",
                        help="on an error, also print its traceback (for a bug report)")
 
@@ -268,6 +262,9 @@ def read_film(path, film, flag="--film"):
     """
     if film is None:
         return path
+    if str(path).endswith(".nc"):
+        raise ValueError(f"{flag} selects a film of a measurement table; '{path}' is a posterior, which "
+                         f"holds one film already: leave out {flag} {film}")
     from ..data import read_measurements
     from ..data.io import file_format
 

@@ -11,7 +11,6 @@ import numpy as np
 from .._atomic import write_file_set
 from ..inference.arguments import eps_argument as eps_argument_api
 from ..likelihood import noise_floor_argument
-from ._arguments import INFER_METHODS as _METHODS
 from ._arguments import (
     METHOD_HELP,
     add_film_argument,
@@ -144,7 +143,7 @@ def run_infer(args):
         measurements = read_measurements(measurements, **film_state(args))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ConvergenceWarning)
-        idata = infer(measurements, method=_METHODS[args.method], seed=args.seed,
+        idata = infer(measurements, method=args.method, seed=args.seed,
                       g=args.g, eps=eps, progress=not args.no_progress, settings=settings,
                       substrate_sd=args.substrate_sd, noise_floor=noise_floor,
                       exclude_mirror_deg=args.exclude_mirror, max_angle_deg=args.max_angle,

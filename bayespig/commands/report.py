@@ -7,13 +7,16 @@ import sys
 import warnings
 from pathlib import Path
 
-from ._arguments import INFER_METHODS as _METHODS
-from ._arguments import METHOD_HELP, add_input_argument, add_output_argument, add_verbosity_arguments, method_argument
 from ._arguments import (
+    METHOD_HELP,
     add_film_argument,
     add_film_state_arguments,
+    add_input_argument,
+    add_output_argument,
     add_substrate_argument,
+    add_verbosity_arguments,
     film_state,
+    method_argument,
     read_film,
 )
 from .infer import eps_argument
@@ -60,8 +63,7 @@ def add_report_parser(subparsers):
     parser.add_argument("--overwrite", action="store_true",
                         help="replace the --out folder whole even when it is not an earlier report "
                              "(without it, only an empty folder or an earlier bayespig report is replaced)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress output")
-    add_verbosity_arguments(parser, no_progress_alias=False)
+    add_verbosity_arguments(parser)
     parser.set_defaults(func=run_report)
     return parser
 
@@ -85,7 +87,7 @@ def run_report(args):
     if eps is not None and Path(args.source).suffix.lower() in NETCDF_SUFFIXES:
         raise ValueError(f"--eps: {args.source} is a posterior, inferred with its own eps; --eps applies "
                          "only when report infers from a measurement file (or run bayespig infer --eps)")
-    infer_kwargs = {"method": _METHODS[args.method], "seed": args.seed, "g": args.g,
+    infer_kwargs = {"method": args.method, "seed": args.seed, "g": args.g,
                     "substrate_sd": args.substrate_sd, "eps": eps, "eps_given_as": "--eps"}
     source = read_film(args.source, args.film)
     if film_state(args) and isinstance(source, (str, os.PathLike)):
@@ -148,8 +150,7 @@ def add_demo_parser(subparsers):
                         help="shorter runs at every second wavelength (for tests)")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace the --out folder whole even when it is not an earlier report")
-    parser.add_argument("--no-progress", action="store_true", help="no progress output")
-    add_verbosity_arguments(parser, no_progress_alias=False)
+    add_verbosity_arguments(parser)
     parser.set_defaults(func=run_demo)
     return parser
 

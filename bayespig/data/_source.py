@@ -206,6 +206,10 @@ class Source:
         return update
 
 
+#: First bytes of netCDF-4 (HDF5) and classic netCDF files: a posterior, not measurements.
+NETCDF_SIGNATURES = (b"\x89HDF\r\n\x1a\n", b"CDF\x01", b"CDF\x02", b"CDF\x05")
+
+
 def load(path):
     """A :class:`Source` for ``path`` (read once; a Source is returned as it is).
 
@@ -222,4 +226,9 @@ def load(path):
         data = Path(path).read_bytes()
     except OSError as error:
         raise MeasurementError(Problem(_open_problem(name, error), file=name)) from None
+    if data.startswith(NETCDF_SIGNATURES):
+        raise MeasurementError(Problem(
+            "this is a netCDF file (a bayespig posterior?), not a measurement file; a posterior goes "
+            "to 'bayespig report', measurements are a bayespig CSV, an ASTM E1392 file or a wide "
+            "spectral table", file=name))
     return Source(name, data)

@@ -52,3 +52,11 @@ def test_check_output_path_returns_the_folder_the_output_will_create(tmp_path):
     assert check_output_path(tmp_path / "f.csv", "file") is None  # replaced atomically when written
     with pytest.raises(ValueError, match="kind must be 'file' or 'folder'"):
         check_output_path(tmp_path, "dir")
+
+
+def test_film_of_a_posterior_is_refused(tmp_path):
+    from bayespig.commands._arguments import read_film
+
+    with pytest.raises(ValueError, match=r"^--film selects a film of a measurement table; '.*run.nc' is a posterior, "
+                                         r"which holds one film already: leave out --film 04B$"):
+        read_film(tmp_path / "run.nc", "04B")

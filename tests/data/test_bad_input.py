@@ -488,3 +488,16 @@ def test_measurement_in_python_refuses_percent_but_keeps_simulated_noise_above_o
         "field 'values': values of 8d-sci: reflectance 1.6 exceeds 1.5: this looks like percent; "
         "divide by 100"
     )
+
+
+def test_a_posterior_given_as_measurements_is_named_as_such(tmp_path):
+    """A netCDF file (e.g. run/posterior.nc) is not sniffed as text: one plain message."""
+    from bayespig.data import read_measurements
+
+    path = tmp_path / "posterior.nc"
+    path.write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(200))
+    with pytest.raises(MeasurementError) as excinfo:
+        read_measurements(path)
+    assert str(excinfo.value) == (
+        f"{path}: this is a netCDF file (a bayespig posterior?), not a measurement file; a posterior goes "
+        "to 'bayespig report', measurements are a bayespig CSV, an ASTM E1392 file or a wide spectral table")
