@@ -7,6 +7,7 @@ import pytest
 
 from bayespig import colorimetry as cm
 from bayespig import kubelka_munk as km
+from bayespig import robustness_study, simulate
 from bayespig.fit import FitSettings, film_term, fit_batch, fit_measurements, fit_problem
 from bayespig.instruments import Channel, get_instrument, predict
 from bayespig.likelihood import Problem, multiplicative_normal_logpdf
@@ -48,6 +49,14 @@ def _observed():
 
 # (call, error type, start of the message: the argument's name and what is wrong)
 BAD_CALLS = {
+    "simulate seed True": (lambda: simulate(a=0.1, tau=1.0, design=4, seed=True), TypeError,
+                           "seed must be an integer, not a boolean: got True"),
+    "simulate seed -1": (lambda: simulate(a=0.1, tau=1.0, design=4, seed=-1), ValueError,
+                         "seed must be an integer >= 0, got -1"),
+    "robustness seed True": (lambda: robustness_study(4, 0.1, 1.0, n_repeat=2, seed=True), TypeError,
+                             "seed must be an integer, not a boolean: got True"),
+    "robustness n_repeat 2.5": (lambda: robustness_study(4, 0.1, 1.0, n_repeat=2.5), TypeError,
+                                "n_repeat must be an integer, got 2.5 (float)"),
     # colorimetry
     "weighting_matrix wavelength str": (lambda: cm.weighting_matrix("400"), TypeError, "wavelength_nm must be a number or an array"),
     "weighting_matrix wavelength None": (lambda: cm.weighting_matrix(None), TypeError, "wavelength_nm must be"),

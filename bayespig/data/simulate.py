@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._validation import integer
 from ..instruments import get_instrument, predict
 from ..likelihood import method_name
 from ..physics.forward import specular_transmittance
@@ -247,6 +248,7 @@ def simulate(
             f"{instrument.labels}"
         )
     specs = _film_specs(design)
+    seed = integer("seed", seed, low=0)  # recorded in the metadata; bools refused
     rng = np.random.default_rng(seed)
 
     def distort(values):

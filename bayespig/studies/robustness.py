@@ -43,6 +43,7 @@ import numpy as np
 from .. import __version__
 from .._atomic import atomic_path, write_text_atomically
 from .._pool import local_pool, stop_pool
+from .._validation import integer
 from ..data.model import BLACK_SUBSTRATE_ALBEDO, WHITE_SUBSTRATE_ALBEDO
 from ..data.simulate import DESIGNS
 from ..fit import FitSettings, film_term, fit_batch
@@ -561,10 +562,8 @@ def _check_case_arguments(methods, a0_values, tau0_values, eps, n_repeat, seed):
             raise ValueError(f"tau0 (optical thickness) must be finite and > 0, got {tau0!r}")
     if not (np.isfinite(eps) and 0.0 <= eps < 0.2):
         raise ValueError(f"eps (relative measurement error) must lie in [0, 0.2), got {eps!r}")
-    if int(n_repeat) != n_repeat or n_repeat < 2:
-        raise ValueError(f"n_repeat must be an integer >= 2, got {n_repeat!r}")
-    if int(seed) != seed or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    integer("n_repeat", n_repeat, low=2)
+    integer("seed", seed, low=0)  # bools refused: seed=True is a mistake, not seed 1
 
 
 def _grid(
