@@ -18,8 +18,9 @@ import sys
 import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
 
-__all__ = ["local_pool", "stop_pool"]
+__all__ = ["executor_or_local_pool", "local_pool", "stop_pool"]
 
 #: Seconds between the checks of a worker's fallback thread that its parent is alive.
 PARENT_POLL_S = 0.5
@@ -111,3 +112,23 @@ def stop_pool(pool):
     finally:
         if main:
             signal.signal(signal.SIGINT, previous)
+
+
+@contextmanager
+def executor_or_local_pool(executor, *, needed=True, max_workers=None):
+    """The caller's ``executor``, or for the block a :func:`local_pool` (when ``needed``).
+
+    The local pool is shut down when the block ends, and on any exception (an error or Ctrl-C)
+    stopped at once by :func:`stop_pool` before the exception goes on; the caller's executor is
+    the caller's to manage. ``needed=False`` (e.g. one task only) yields None: run in-process.
+    """
+    if executor is not None or not needed:
+        yield executor
+        return
+    pool = local_pool(max_workers)
+    try:
+        yield pool
+    except BaseException:
+        stop_pool(pool)
+        raise
+    pool.shutdown(cancel_futures=True)

@@ -46,7 +46,7 @@ import numpy as np
 
 from . import __version__
 from ._atomic import atomic_path
-from ._pool import local_pool, stop_pool
+from ._pool import executor_or_local_pool
 from ._validation import broadcast, choice, integer, real_array, real_scalar
 from .instruments import Instrument, channel_directions, get_instrument
 from .physics.adding_doubling import (
@@ -452,18 +452,14 @@ def build_table(instrument, settings=None, *, executor=None, progress=True):
         raise TypeError(f"settings must be a TableSettings or None, got {settings!r} ({type(settings).__name__})")
     settings = settings or TableSettings()
     g_nodes = settings.g_nodes
-    own_executor = executor is None and g_nodes.size > 1
-    if own_executor:
-        executor = local_pool()
-    finished = False
-    try:
-        if executor is None:
+    with executor_or_local_pool(executor, needed=g_nodes.size > 1) as pool:
+        if pool is None:
             slices = [_build_g_slice(instrument, settings, float(g)) for g in g_nodes]
         else:
             # the dearest slices first (backward scattering needs the most Fourier modes), so
             # that the last ones to finish are cheap; results are gathered in node order
             order = sorted(range(g_nodes.size), key=lambda i: -_slice_cost(g_nodes[i]))
-            submitted = {i: executor.submit(_build_g_slice, instrument, settings, float(g_nodes[i])) for i in order}
+            submitted = {i: pool.submit(_build_g_slice, instrument, settings, float(g_nodes[i])) for i in order}
             futures = [submitted[i] for i in range(g_nodes.size)]
             slices = []
             iterator = futures
@@ -473,12 +469,6 @@ def build_table(instrument, settings=None, *, executor=None, progress=True):
                 iterator = tqdm(futures, desc=f"building table {instrument.name}", unit="g", file=sys.stderr)
             for future in iterator:
                 slices.append(future.result())
-        finished = True
-    finally:
-        if own_executor and finished:
-            executor.shutdown()
-        elif own_executor:
-            stop_pool(executor)  # Ctrl-C or an error: no waiting for the running slices
     arrays = {key: np.stack([s[key] for s in slices]) for key in slices[0]}
     return LookupTable(instrument, settings, arrays, table_key(instrument, settings))
 

@@ -139,7 +139,7 @@ differential-evolution moves; Vehtari et al. (2021), rank-normalised R-hat and E
 
 # the public names, and helpers that the studies and benchmarks import from here
 from .api import _point_starts, _resolve_eps, infer, infer_problem  # noqa: F401
-from .moves import IndependentEnsemblesMove, _moves, ensemble_halves  # noqa: F401
+from .moves import IndependentEnsemblesMove, _moves  # noqa: F401
 from .outputs import PRIOR_BOUNDS_ATTR, _prior_bounds, _versions, _wavelength_outputs  # noqa: F401
 from .sampler import _autocorr_times, _initial_walkers, _sample_stack, _sample_wavelength  # noqa: F401
 from .settings import ESS_MIN, MOVES, RHAT_MAX, ConvergenceWarning, InferenceSettings  # noqa: F401

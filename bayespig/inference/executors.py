@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._pool import PARENT_POLL_S, TERMINATE_WAIT_S, local_pool, stop_pool  # noqa: F401 (re-exported)
+from .._pool import executor_or_local_pool
 from ..likelihood import ForwardModel, LogPosterior, Priors, Problem
 from .outputs import _wavelength_outputs
 from .sampler import _sample_stack
@@ -59,16 +59,9 @@ def run_tasks(tasks, executor, progress, max_workers=2):
     On any exception (KeyboardInterrupt included) the pending tasks are cancelled, a local
     pool's workers terminated, and the exception re-raised.
     """
-    if executor is not None or len(tasks) <= 1:
-        return _map_tasks(tasks, executor, progress)
-    pool = local_pool(min(max_workers, len(tasks), os.cpu_count() or 1))
-    try:
-        results = _map_tasks(tasks, pool, progress)
-    except BaseException:
-        stop_pool(pool)
-        raise
-    pool.shutdown()
-    return results
+    with executor_or_local_pool(executor, needed=len(tasks) > 1,
+                                max_workers=min(max_workers, len(tasks), os.cpu_count() or 1)) as pool:
+        return _map_tasks(tasks, pool, progress)
 
 
 def _map_tasks(tasks, executor, progress):

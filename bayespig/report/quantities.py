@@ -39,6 +39,7 @@ import numpy as np
 
 from .. import colorimetry
 from ..data.model import BLACK_SUBSTRATE_ALBEDO, WHITE_SUBSTRATE_ALBEDO, parse_measurement_geometry
+from ..inference import diagnose
 from ..inference.outputs import PRIOR_BOUNDS_ATTR
 from ..instruments import Channel, Instrument
 from ..likelihood import FilmTerm, Priors, Problem, noise_sd
@@ -48,14 +49,14 @@ __all__ = [
     "DEFAULT_EPS",
     "EPS_SOURCE_ATTR",
     "ESS_MIN",
+    "GONIO_LARGE_GEOMETRIES",
+    "MIRROR_DISTANCE_BINS_DEG",
     "PPC_LEVEL",
     "PRIOR_BOUNDS_ATTR",
     "PRIOR_EDGE_FLOOR",
     "PRIOR_EDGE_FRACTION",
     "RHAT_MAX",
     "SPREAD_QUANTILE",
-    "GONIO_LARGE_GEOMETRIES",
-    "MIRROR_DISTANCE_BINS_DEG",
     "FilmDesign",
     "Lab_to_sRGB",
     "Ravine",
@@ -563,21 +564,9 @@ def diagnostics(idata, variables=None, *, rhat_max=RHAT_MAX, ess_min=ESS_MIN, pr
                 if rhat is not None else {v: np.full(ess_out[v].shape, np.nan) for v in variables})
     wl = wavelengths(idata)
     flags = {}
-    try:
-        from ..inference import diagnose
-    except ImportError:  # pragma: no cover - the inference layer ships with the package
-        diagnose = None
-    if diagnose is not None:
-        for line in diagnose(idata, rhat_max=rhat_max, ess_min=ess_min, warn=False):
-            head, _, reasons = line.partition(" nm: ")
-            flags.setdefault(float(head), []).extend(reasons.split("; "))
-    else:
-        for i, w in enumerate(wl):
-            for v in variables:
-                if np.isfinite(rhat_out[v][i]) and rhat_out[v][i] > rhat_max:
-                    flags.setdefault(float(w), []).append(f"R-hat({v}) = {rhat_out[v][i]:.3f} > {rhat_max:g}")
-                if not ess_out[v][i] >= ess_min:
-                    flags.setdefault(float(w), []).append(f"ESS({v}) = {ess_out[v][i]:.0f} < {ess_min:g}")
+    for line in diagnose(idata, rhat_max=rhat_max, ess_min=ess_min, warn=False):
+        head, _, reasons = line.partition(" nm: ")
+        flags.setdefault(float(head), []).extend(reasons.split("; "))
     if "tau" in posterior:
         tau_q95 = np.quantile(posterior_draws(idata, "tau"), 0.95, axis=0)
         tau_limit = (priors or priors_from_inference(idata)).tau_range[1] / 2.0

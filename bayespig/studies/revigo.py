@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import write_text_atomically
-from .._pool import local_pool, stop_pool
+from .._pool import executor_or_local_pool
 from ..colorimetry import delta_E2000
 from ..physics.fresnel import fresnel_reflectance
 from ..physics.mixtures import concentrations_from_mass_fractions
@@ -486,22 +486,14 @@ def _film_posteriors(film_ids, path, specular, eps, seed, executor, say, substra
     """``bayespig.infer`` (method 4, known ``eps``, with card factors for ``substrate_films``, all
     when None) of every film, films in parallel (``executor``, default 2 processes): film id ->
     InferenceData."""
-    own = executor is None
-    pool = local_pool() if own else executor
-    idata, finished = {}, False
-    try:
+    idata = {}
+    with executor_or_local_pool(executor) as pool:
         with_factors = set(film_ids if substrate_films is None else substrate_films)
         futures = {f: pool.submit(_film_posterior, path, specular, f, eps, seed,
                                   substrate_sd if f in with_factors else None) for f in film_ids}
         for film_id, future in futures.items():
             idata[film_id], caught = future.result()
             say(f"posterior of {film_id}" + (f" ({'; '.join(caught)})" if caught else ""))
-        finished = True
-    finally:
-        if own and finished:
-            pool.shutdown()
-        elif own:
-            stop_pool(pool)  # Ctrl-C or an error: no waiting for the running films
     return idata
 
 

@@ -34,7 +34,6 @@ import platform
 import sys
 import time
 from collections.abc import Iterable
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,7 +41,7 @@ import numpy as np
 
 from .. import __version__
 from .._atomic import atomic_path, write_text_atomically
-from .._pool import local_pool, stop_pool
+from .._pool import executor_or_local_pool
 from .._validation import integer
 from ..data.model import BLACK_SUBSTRATE_ALBEDO, WHITE_SUBSTRATE_ALBEDO
 from ..data.simulate import DESIGNS
@@ -494,31 +493,6 @@ def _run_case(case):
 _COST = {"method3": 4, "method4": 2, "method2": 2, "method1": 1}
 
 
-def _stop_pool(pool, interrupted):
-    """Shut a local pool down; after Ctrl-C without waiting for the running cases (their
-    workers are terminated: nothing of theirs is kept)."""
-    if interrupted:
-        stop_pool(pool)
-    else:
-        pool.shutdown(cancel_futures=True)
-
-
-@contextmanager
-def _executor_or_local(executor, n_cases):
-    """The given executor, or a local pool of 2 processes when there are several cases."""
-    if executor is not None or n_cases < 2:
-        yield executor
-        return
-    pool = local_pool()
-    try:
-        yield pool
-    except KeyboardInterrupt:
-        _stop_pool(pool, interrupted=True)
-        raise
-    else:
-        _stop_pool(pool, interrupted=False)
-
-
 def _progress_bar(total, progress):
     """A tqdm bar (stderr) over ``total`` refits, or None without ``progress``."""
     if not progress:
@@ -531,7 +505,7 @@ def _progress_bar(total, progress):
 def _run_cases(cases, executor, bar=None):
     """Results of every case in order; ``bar`` (tqdm) advances by each finished case's refits."""
     order = sorted(range(len(cases)), key=lambda i: -_COST[cases[i].method])
-    with _executor_or_local(executor, len(cases)) as pool:
+    with executor_or_local_pool(executor, needed=len(cases) >= 2) as pool:
         results = {}
         if pool is None:
             order = range(len(cases))
@@ -1038,22 +1012,16 @@ def write_paper_tables(
                                                      instrument, FitSettings(start=(0.1, tau_start)))
         studies["escape"] = (("method2", "method4"), PAPER_A0, (2.0,), escape_repeats, instrument, None)
     total = sum(len(m) * len(a) * len(t) * repeats for m, a, t, repeats, _, _ in studies.values())
-    own = executor is None
-    pool = local_pool() if own else executor
     bar = _progress_bar(total, progress)
-    grids, interrupted = {}, False
+    grids = {}
     try:
-        for name, (methods, a0, tau0, repeats, inst, settings) in studies.items():
-            grids[name] = _grid(methods, a0, tau0, n_repeat=repeats, instrument=inst, executor=pool,
-                                fit_settings=settings, bar=bar, **common)
-    except KeyboardInterrupt:
-        interrupted = True
-        raise
+        with executor_or_local_pool(executor) as pool:
+            for name, (methods, a0, tau0, repeats, inst, settings) in studies.items():
+                grids[name] = _grid(methods, a0, tau0, n_repeat=repeats, instrument=inst, executor=pool,
+                                    fit_settings=settings, bar=bar, **common)
     finally:
         if bar is not None:
             bar.close()
-        if own:
-            _stop_pool(pool, interrupted)
     text = _report(grids, command=command, elapsed=time.perf_counter() - started, eps=eps)
     write_text_atomically(path, text)
     return grids
