@@ -7,6 +7,7 @@ import sys
 import warnings
 from pathlib import Path
 
+from ..inference.arguments import DEFAULT_EPS
 from ._arguments import (
     METHOD_HELP,
     add_film_argument,
@@ -122,7 +123,7 @@ def _print_result(result):
         verdict = "good enough" if colour["good_enough_for_colour_matching"] else "NOT good enough"
         hedge = ""
         if colour.get("verdict_assumes_eps"):
-            hedge = " if eps is the assumed 0.05 (pass --eps with your instrument's value)"
+            hedge = f" if eps is the assumed {DEFAULT_EPS:g} (pass --eps with your instrument's value)"
         print(f"colour spread of the measured samples: dE00 <= {colour['max_dE00_spread_measured']:.2f} "
               f"(95th percentile) - {verdict} for colour matching{hedge}")
     for edge in summary.get("prior_edge") or ():

@@ -19,6 +19,7 @@ from ..likelihood import (
 )
 from ..selection import select_measurements
 from .arguments import (
+    DEFAULT_EPS,
     check_executor,
     check_flag,
     check_g,
@@ -56,7 +57,7 @@ def _resolve_eps(eps, measurements):
     if eps is None:
         metadata = getattr(measurements, "metadata", None) or {}
         value = metadata.get("eps") if isinstance(metadata, Mapping) else None
-        eps = float(value) if isinstance(value, (int, float)) and value > 0 else 0.05
+        eps = float(value) if isinstance(value, (int, float)) and value > 0 else DEFAULT_EPS
     return eps, "known"
 
 

@@ -17,6 +17,7 @@ from ..likelihood import Priors, method_name, noise_floor_argument
 from .settings import InferenceSettings
 
 __all__ = [
+    "DEFAULT_EPS",
     "EPS_RANGE",
     "check_executor",
     "check_flag",
@@ -34,6 +35,8 @@ __all__ = [
 #: Open interval of a known relative error ``eps`` [-]: a relative standard deviation of the
 #: measured values (eq. 7), 0.02 for 2 %; 1 or more would be noise as large as the signal.
 EPS_RANGE = (0.0, 1.0)
+#: bayespig.infer's eps when neither the call nor the file gives one [-] (the paper's 5 %, eq. 7).
+DEFAULT_EPS = 0.05
 
 
 def _shown(value):

@@ -40,6 +40,7 @@ import numpy as np
 from .. import colorimetry
 from ..data.model import BLACK_SUBSTRATE_ALBEDO, WHITE_SUBSTRATE_ALBEDO, parse_measurement_geometry
 from ..inference import diagnose
+from ..inference.arguments import DEFAULT_EPS
 from ..inference.outputs import PRIOR_BOUNDS_ATTR
 from ..instruments import Channel, Instrument
 from ..likelihood import FilmTerm, Priors, Problem, noise_sd
@@ -603,8 +604,6 @@ def eps_per_value(idata):
     return eps
 
 
-#: bayespig.infer's eps when neither the call nor the file gives one [-] (paper eq. 7).
-DEFAULT_EPS = 0.05
 #: Posterior attribute recording where a known eps came from (:func:`record_eps_source`).
 EPS_SOURCE_ATTR = "eps_source"
 

@@ -31,11 +31,12 @@ PUBLISHED_5_DECIMALS_ABS_TOL = 1e-5
 #: (9x); iadpython <= 3.1e-5 (3.2x: iadpython's own quadrature error, ~2-4e-5 at 48 to 64
 #: points, it breaks down above ~90; bayespig changes by < 3e-10 from the default to 64 points).
 TABLE_ABS_TOL = 1e-4
-#: REFERENCE-VALUES section 3's g = 0.9 rows. They are good to ~1e-4 only: bayespig's totals are
+#: REFERENCE-VALUES section 3's g = 0.9, n = 1 row only (the n = 1.45 row keeps TABLE_ABS_TOL:
+#: measured 2.8e-5, 3.6x). That published row is good to ~1e-4 only: bayespig's totals are
 #: converged (they change by < 1e-6 from 32 to 96 points, SLAB_QUADRATURE_CONVERGED_ABS_TOL) and
-#: differ from the n = 1 row by 8.2e-5 (URU, UTU), from the n = 1.45 row by 2.8e-5; iadpython, the
-#: kind of code such tables come from, moves by 2e-3 from 16 to 32 points there and fails at 48.
-#: Margin 6x over 8.2e-5.
+#: differ from it by 8.2e-5 (URU, UTU), 1.2x inside 1e-4, a difference that is the table's, not
+#: the machine's; iadpython, the kind of code such tables come from, moves by 2e-3 from 16 to 32
+#: points there and fails at 48. Margin 6x over 8.2e-5.
 SLAB_G09_ABS_TOL = 5e-4
 #: The slab totals at g = 0.9 at the default quadrature and at 64 points: measured <= 1e-6
 #: (n = 1 and 1.45). Margin 10x.
@@ -503,7 +504,7 @@ def test_slab_totals_reference_table(omega, b, g, n, expected):
     # the default quadrature (default_quadrature_points) grows with |g|: 32 points at g = 0.9
     totals = adding_doubling.slab_totals(a=1.0 - omega, tau=b, g=g, n=n)
     got = [totals[key] for key in TOTAL_KEYS]
-    np.testing.assert_allclose(got, expected, rtol=0, atol=SLAB_G09_ABS_TOL if g == 0.9 else TABLE_ABS_TOL)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=SLAB_G09_ABS_TOL if (g, n) == (0.9, 1.0) else TABLE_ABS_TOL)
 
 
 @pytest.mark.parametrize("n", [1.0, 1.45])
