@@ -434,13 +434,28 @@ def _parse_row(
     if valid:
         high = np.where(np.isnan(values), -np.inf, values)
         top = int(np.argmax(high))
-        if high[top] > PERCENT_THRESHOLD and (units != "fraction" or kind != "brdf"):
+        # a percent file's reflectances are judged by value_problem below (with its reasons); a
+        # BRDF is in 1/sr whatever the units line, so in a percent file a value above 150 % is
+        # a BRDF above 1.5 1/sr written as percent
+        if high[top] > PERCENT_THRESHOLD and (
+            units is None or (units == "fraction") != (kind == "brdf")
+        ):
             if units == "percent":
-                message = f"value {high[top] * 100:g} % exceeds {PERCENT_THRESHOLD * 100:g} %"
+                message = (
+                    f"value {high[top] * 100:g} % exceeds {PERCENT_THRESHOLD * 100:g} %: a BRDF is "
+                    "given in 1/sr, not in percent; write BRDFs in a file with '# units: fraction'"
+                )
             elif units == "fraction":
                 message = (
                     f"value {high[top]:g} exceeds {PERCENT_THRESHOLD} although '# units: fraction' "
                     "is set; this looks like percent"
+                )
+            elif kind == "brdf":
+                message = (
+                    f"value {high[top]:g} exceeds {PERCENT_THRESHOLD}: this looks like percent "
+                    "(divide by 100 or add the line '# units: percent' before the header), or it "
+                    f"is a BRDF above {PERCENT_THRESHOLD} 1/sr (a gloss peak), read only when the "
+                    "file says so: add the line '# units: fraction' before the header"
                 )
             else:
                 message = (

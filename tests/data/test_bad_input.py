@@ -501,3 +501,32 @@ def test_a_posterior_given_as_measurements_is_named_as_such(tmp_path):
     assert str(excinfo.value) == (
         f"{path}: this is a netCDF file (a bayespig posterior?), not a measurement file; a posterior goes "
         "to 'bayespig report', measurements are a bayespig CSV, an ASTM E1392 file or a wide spectral table")
+
+
+def test_percent_csv_far_above_bound_gets_the_same_reason(tmp_path):
+    """300 % in a percent file: the reflectance bound's full reason, not a bare threshold."""
+    path = write(
+        tmp_path / "p.csv",
+        "# units: percent\nsample,role,opaque,measurement,geometry,400,500\n"
+        "card,substrate,no,hemispherical,8d-sce,120,300\n",
+    )
+    with pytest.raises(MeasurementError) as error:
+        read_csv(path)
+    assert only_problem(error) == (
+        f"{path}, row 3, field '500': reflectance 300 % exceeds 105 %: {CALIBRATION}"
+    )
+
+
+def test_brdf_above_1_5_without_units_line_is_told_to_say_fraction(tmp_path):
+    path = write(
+        tmp_path / "b.csv",
+        "sample,role,opaque,measurement,geometry,400,500\n"
+        "gloss,film,yes,brdf,45as5,0.5,3\n",
+    )
+    with pytest.raises(MeasurementError) as error:
+        read_csv(path)
+    assert only_problem(error) == (
+        f"{path}, row 2, field '500': value 3 exceeds 1.5: this looks like percent (divide by 100 or add "
+        "the line '# units: percent' before the header), or it is a BRDF above 1.5 1/sr (a gloss peak), "
+        "read only when the file says so: add the line '# units: fraction' before the header"
+    )
