@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import MeasurementError, Problem
-from .model import ROLES, Measurement, MeasurementSet, Sample, set_problems
+from .model import FILM_ROLES, ROLES, Measurement, MeasurementSet, Sample, set_problems
+from .writers import RECIPE_FIELD, RECIPE_SYNTAX
 
 #: Per-sample attributes a file can give, in the order they are written.
 SAMPLE_FIELDS = (
@@ -33,6 +34,9 @@ SAMPLE_FIELDS = (
 #: Cards below these values cannot have an albedo under binder above 1, so their albedo is not
 #: computed for the warning about it: hemispherical/45-0 reflectance [-] and BRDF [1/sr]
 #: (eq. 9 inverted exceeds 1 only above about 1 - r_F = 0.96 and 0.35 1/sr at n = 1.45).
+#: Two recipes of one film group are the same when their normalised fractions agree this well
+#: (relative): ``ZincWhite:90;BoneBlack:10`` and ``ZincWhite:9;BoneBlack:1`` are one recipe.
+RECIPE_MATCH_RTOL = 1e-9
 CARD_CHECK_REFLECTANCE = 0.8
 CARD_CHECK_BRDF = 0.8 / math.pi
 _TRUE = ("yes", "y", "true", "1")
@@ -56,7 +60,8 @@ class Row:
     values : numpy.ndarray
         One value per wavelength of the file, NaN where the cell was blank.
     attributes : dict
-        Sample attribute -> text as written (blank = not given).
+        Sample attribute -> text as written (blank = not given); also ``"recipe"``, the
+        film's recipe (:func:`parse_recipe`).
     fields : dict
         Sample attribute -> name of the field it came from (column or keyword), for messages.
     wavelength_fields : list of str
@@ -97,6 +102,151 @@ def parse_number(text):
                 f"{text!r} is not a number (decimal comma? use a point: {text.replace(',', '.')})"
             ) from None
         raise ValueError(f"{text!r} is not a number") from None
+
+
+def parse_recipe(text):
+    """A film's recipe from its text (``ZincWhite:90;BoneBlack:10``), as metadata.
+
+    ``pigment:amount`` pairs separated by ``;`` (spaces around names and amounts are ignored,
+    a final ``;`` too); amounts are relative masses >= 0 in any unit (they need not sum to 1
+    or 100); a zero amount is kept (the pigment is absent, as in the Revigo specifications).
+
+    Returns
+    -------
+    dict
+        ``{"pigments": [str, ...], "mass_ratios": [float, ...]}``, in the written order: the
+        form :func:`bayespig.data.read_revigo` gives in ``metadata["composition"]``.
+
+    Raises
+    ------
+    ValueError
+        Saying what is wrong: not ``pigment:amount`` pairs, an amount that is not a number,
+        NaN, infinite or negative, a pigment given twice, all amounts zero.
+    """
+    parts = [part.strip() for part in text.split(";")]
+    if len(parts) > 1 and not parts[-1]:
+        parts.pop()
+    pigments, ratios = [], []
+    for part in parts:
+        name, colon, amount = part.partition(":")
+        name, amount = name.strip(), amount.strip()
+        if not colon or not name or not amount or ":" in amount:
+            raise ValueError(
+                f"cannot read recipe {text!r}: {part!r} is not pigment:amount; {RECIPE_SYNTAX}"
+            )
+        try:
+            value = parse_number(amount)
+        except ValueError as error:
+            raise ValueError(f"recipe {text!r}: the amount of {name!r}: {error}") from None
+        if math.isnan(value):
+            raise ValueError(f"recipe {text!r}: the amount of {name!r} is NaN; give a number >= 0")
+        if math.isinf(value):
+            raise ValueError(
+                f"recipe {text!r}: the amount of {name!r} must be finite, got {amount}"
+            )
+        if value < 0:
+            raise ValueError(
+                f"recipe {text!r}: the amount of {name!r} is negative ({amount}); amounts are >= 0"
+            )
+        if name in pigments:
+            raise ValueError(f"recipe {text!r}: pigment {name!r} is given twice")
+        pigments.append(name)
+        ratios.append(value)
+    if not any(ratios):
+        raise ValueError(
+            f"recipe {text!r}: all amounts are zero; a film needs at least one pigment"
+        )
+    return {"pigments": pigments, "mass_ratios": ratios}
+
+
+def _same_recipe(first, second):
+    """True when two compositions are one recipe (the same normalised fractions)."""
+
+    def fractions(composition):
+        total = math.fsum(composition["mass_ratios"])
+        return {
+            p: r / total for p, r in zip(composition["pigments"], composition["mass_ratios"]) if r
+        }
+
+    a, b = fractions(first), fractions(second)
+    return a.keys() == b.keys() and all(
+        math.isclose(a[p], b[p], rel_tol=RECIPE_MATCH_RTOL) for p in a
+    )
+
+
+def _recipes(by_sample, built, problems):
+    """Film group -> (composition, text, row) from the rows' recipe cells (problems appended)."""
+    groups = {}
+    for name, sample_rows in by_sample.items():
+        for r in sample_rows:
+            text = r.attributes.get(RECIPE_FIELD, "").strip()
+            if not text:
+                continue
+            try:
+                composition = parse_recipe(text)
+            except ValueError as error:
+                problems.append(r.locate(Problem(str(error), field=RECIPE_FIELD)))
+                continue
+            sample = built.get(name)
+            if sample is None:
+                continue  # the sample's own problems are reported
+            if sample.role not in FILM_ROLES:
+                problems.append(
+                    r.locate(
+                        Problem(
+                            f"sample {name!r} is a {sample.role}; only films have a recipe "
+                            "(leave the cell blank)",
+                            field=RECIPE_FIELD,
+                        )
+                    )
+                )
+                continue
+            if sample.group not in groups:
+                groups[sample.group] = (composition, text, r)
+                continue
+            first, first_text, first_row = groups[sample.group]
+            if not _same_recipe(first, composition):
+                problems.append(
+                    r.locate(
+                        Problem(
+                            f"film group {sample.group!r} has recipe {text!r} here but "
+                            f"{first_text!r} in {_where(first_row, r)}; the films of one film "
+                            "group are one paint: give them one recipe",
+                            field=RECIPE_FIELD,
+                        )
+                    )
+                )
+    return groups
+
+
+def _recipe_metadata(groups, samples, metadata, problems):
+    """The metadata with the file's recipes: ``composition``, or ``compositions`` per group.
+
+    One ``composition`` when every film group has a recipe and all are written alike (one
+    film, or several films of one paint); otherwise ``compositions``: film group ->
+    composition, for the groups that have one.
+    """
+    if not groups:
+        return metadata
+    first_row = min((r for _, _, r in groups.values()), key=lambda r: r.row)
+    given = [key for key in ("composition", "compositions") if key in metadata]
+    if given:
+        problems.append(
+            first_row.locate(
+                Problem(
+                    f"the file gives recipes both in the {RECIPE_FIELD!r} column and as "
+                    f"'# {given[0]}:' metadata; keep one of them",
+                    field=RECIPE_FIELD,
+                )
+            )
+        )
+        return metadata
+    compositions = {group: composition for group, (composition, _, _) in groups.items()}
+    film_groups = {s.group for s in samples if s.role in FILM_ROLES}
+    values = list(compositions.values())
+    if set(compositions) == film_groups and all(v == values[0] for v in values):
+        return {**metadata, "composition": values[0]}
+    return {**metadata, "compositions": compositions}
 
 
 def _convert(name, text, sample_names):
@@ -335,6 +485,8 @@ def assemble(
                 )
                 problems.append((r or sample_rows[0]).locate(p))
 
+    recipes = _recipes(by_sample, {s.name: s for s in samples}, problems)
+    metadata = _recipe_metadata(recipes, samples, dict(metadata or {}), problems)
     built = {s.name for s in samples}
     for p in set_problems(wavelength_nm, samples) if samples else []:
         substrate = next((s.substrate for s in samples if s.name == p.sample), None)
@@ -350,9 +502,7 @@ def assemble(
     if problems:
         # A header keyword (ASTM E1392 ``ROLE``) is checked on each of its rows: once is enough.
         raise MeasurementError(list(dict.fromkeys(problems)))
-    measurement_set = MeasurementSet(
-        wavelength_nm, samples, n=n, metadata=metadata or {}, source=source
-    )
+    measurement_set = MeasurementSet(wavelength_nm, samples, n=n, metadata=metadata, source=source)
     _warn_implausible(measurement_set, where)
     return measurement_set
 

@@ -18,8 +18,22 @@ metadata, read as JSON when it parses as JSON and as text otherwise); other
 Required columns: ``sample``, ``role``, ``measurement``, ``geometry`` and at
 least one wavelength column (a number in nm, e.g. ``400`` or ``400nm``);
 optional: ``substrate``, ``film_group``, ``opaque``, ``thickness_um``,
-``concentration``, ``eps``. Comma, tab or semicolon separated. The full
+``concentration``, ``eps``, ``recipe``. Comma, tab or semicolon separated. The full
 description is in ``docs/file-formats.md``.
+
+A film's **recipe** (``recipe`` column) is ``pigment:amount`` pairs separated by ``;``::
+
+    sample,role,substrate,film_group,recipe,measurement,geometry,400,500
+    over_black,film,black,06B,Vermillion:10;ZincWhite:90,hemispherical,8d-sce,0.05,0.06
+
+Amounts are relative masses of the paints as mixed (any unit: ``10;90`` and ``0.1;0.9``
+are one recipe), >= 0, a zero meaning the pigment is absent; spaces around names and
+amounts are ignored. In a semicolon-separated file quote the cell. Films of one film group
+are one paint and must give one recipe (on any of their rows; blank cells mean "not
+given"); substrates have none. The set's metadata gets the recipe as
+``composition = {"pigments": [...], "mass_ratios": [...]}`` (the form ``read_revigo``
+gives) when every film group has the same one, otherwise ``compositions``: film group ->
+composition. A ``# composition:`` metadata line is the same information: give one of them.
 """
 
 from __future__ import annotations
@@ -36,12 +50,20 @@ from ._assemble import SAMPLE_FIELDS, Row, assemble, parse_number
 from ._source import load
 from .errors import MeasurementError, Problem
 from .model import MEASUREMENT_KINDS, PERCENT_THRESHOLD, value_problem, wavelength_problem
-from .writers import FORMAT_NAME, METADATA_KEY
+from .writers import FORMAT_NAME, METADATA_KEY, RECIPE_FIELD
 
 __all__ = ["FORMAT_NAME", "read_csv"]
 
 REQUIRED_COLUMNS = ("sample", "role", "measurement", "geometry")
-OPTIONAL_COLUMNS = ("substrate", "film_group", "opaque", "thickness_um", "concentration", "eps")
+OPTIONAL_COLUMNS = (
+    "substrate",
+    "film_group",
+    "opaque",
+    "thickness_um",
+    "concentration",
+    "eps",
+    RECIPE_FIELD,
+)
 UNITS = ("fraction", "percent")
 
 _DIRECTIVE = re.compile(r"^#\s*([A-Za-z_][\w.\-]*)\s*:\s?(.*)$")
@@ -475,7 +497,7 @@ def _parse_row(
                 Problem(message, file=name, row=row_number, field=wavelength_columns[top][2])
             )
             valid = False
-    attributes = {key: get[key] for key in SAMPLE_FIELDS if key in get}
+    attributes = {key: get[key] for key in (*SAMPLE_FIELDS, RECIPE_FIELD) if key in get}
     return Row(
         name,
         row_number,

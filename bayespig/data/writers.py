@@ -24,9 +24,12 @@ __all__ = [
     "FORMAT_NAME",
     "KEYWORDS",
     "METADATA_KEY",
+    "RECIPE_FIELD",
+    "RECIPE_SYNTAX",
     "SETTINGS",
     "format_astm_e1392",
     "format_csv",
+    "format_recipe",
     "write_astm_e1392",
     "write_csv",
 ]
@@ -40,6 +43,16 @@ METADATA_KEY = "metadata"
 SETTINGS = ("format", "units", "n", METADATA_KEY)
 #: A metadata key that can be a ``# key: value`` line of its own.
 METADATA_LINE_KEY = re.compile(r"[A-Za-z_][\w.\-]*", re.ASCII)
+
+#: The bayespig CSV column (and sample attribute) holding a film's recipe.
+RECIPE_FIELD = "recipe"
+#: How a recipe is written, for messages.
+RECIPE_SYNTAX = (
+    "write pigment:amount pairs separated by ';', e.g. 'ZincWhite:90;BoneBlack:10' "
+    "(relative masses)"
+)
+#: Characters a pigment name in a recipe cell cannot hold.
+_RECIPE_SEPARATORS = (":", ";")
 
 #: First line of an ASTM E1392 file.
 FORMAT_LINE = "#FORMAT=ASTM-E1392-96"
@@ -86,17 +99,93 @@ def _check_text(text, what):
         )
 
 
+def format_recipe(composition):
+    """``{"pigments": [...], "mass_ratios": [...]}`` as a recipe cell, ``ZincWhite:90;BoneBlack:10``.
+
+    Amounts are written with full precision, so the cell reads back as the same composition.
+
+    Raises
+    ------
+    ValueError
+        When the composition cannot be written as a recipe cell (names with ``:``, ``;``,
+        control characters or surrounding spaces, amounts that are not finite numbers >= 0,
+        all zero, lists of different lengths, a name twice).
+    """
+    if not isinstance(composition, dict) or set(composition) != {"pigments", "mass_ratios"}:
+        raise ValueError("a composition is a dict with 'pigments' and 'mass_ratios' only")
+    pigments, ratios = composition["pigments"], composition["mass_ratios"]
+    if not isinstance(pigments, list) or not isinstance(ratios, list) or not pigments:
+        raise ValueError("a composition's pigments and mass_ratios are non-empty lists")
+    if len(pigments) != len(ratios) or len(set(map(str, pigments))) != len(pigments):
+        raise ValueError("a composition needs one mass ratio per pigment, each pigment once")
+    cells = []
+    for name, ratio in zip(pigments, ratios):
+        if (
+            not isinstance(name, str)
+            or not name
+            or name != name.strip()
+            or any(c in name for c in _RECIPE_SEPARATORS)
+        ):
+            raise ValueError(f"pigment name {name!r} cannot be written in a recipe cell")
+        _check_text(name, "pigment name")
+        if (
+            isinstance(ratio, bool)
+            or not isinstance(ratio, (int, float))
+            or not math.isfinite(ratio)
+            or ratio < 0
+        ):
+            raise ValueError(f"mass ratio {ratio!r} of {name!r} is not a finite number >= 0")
+        cells.append(f"{name}:{_fmt(ratio)}")
+    if not any(ratios):
+        raise ValueError("all mass ratios are zero")
+    return ";".join(cells)
+
+
+def _recipe_cells(measurements):
+    """Sample name -> recipe cell, and the metadata left to write as ``#`` lines.
+
+    ``metadata["composition"]`` is the recipe of every film; ``metadata["compositions"]``
+    (film group -> composition) that of each group. Written as the ``recipe`` column when
+    the file reads back as the same metadata (see ``_assemble._recipe_metadata``), otherwise
+    left as metadata.
+    """
+    metadata = dict(measurements.metadata)
+    groups = measurements.film_groups
+    keys = [key for key in ("composition", "compositions") if key in metadata]
+    if not groups or len(keys) != 1:
+        return {}, metadata
+    if keys == ["composition"]:
+        per_group = {group: metadata["composition"] for group in groups}
+    else:
+        per_group = metadata["compositions"]
+        if not isinstance(per_group, dict) or not set(per_group) <= set(groups):
+            return {}, metadata
+        values = list(per_group.values())
+        if set(per_group) == set(groups) and all(v == values[0] for v in values):
+            return {}, metadata  # it would read back as one 'composition'
+    try:
+        texts = {group: format_recipe(c) for group, c in per_group.items()}
+    except ValueError:
+        return {}, metadata
+    del metadata[keys[0]]
+    cells = {film.name: texts[g] for g, films in groups.items() if g in texts for film in films}
+    return cells, metadata
+
+
 def format_csv(measurements):
     """The bayespig CSV text of a :class:`~bayespig.data.model.MeasurementSet`.
 
     Metadata whose key is a plain identifier (letters, digits, ``_``, ``.``,
     ``-``; not a setting) is written as a ``# key: <JSON>`` line; all other
     keys together as one ``# metadata: <JSON object>`` line, so every key
-    reads back.
+    reads back. The films' recipes (``metadata["composition"]``, or
+    ``metadata["compositions"]`` per film group) are written as the ``recipe``
+    column when they read back the same, else as metadata.
     """
     lines = [f"# format: {FORMAT_NAME}\n# units: fraction\n# n: {_fmt(measurements.n)}\n"]
+    recipes, metadata = _recipe_cells(measurements)
     others = {}
-    for key, value in measurements.metadata.items():
+    for key, value in metadata.items():
         if METADATA_LINE_KEY.fullmatch(key) and key.lower() not in SETTINGS:
             lines.append(f"# {key}: {json.dumps(value)}\n")
         else:
@@ -109,7 +198,7 @@ def format_csv(measurements):
         if any(getattr(s, c) is not None for s in measurements.samples)
     ]
     header = ["sample", "role", "substrate", "film_group", "opaque", *optional]
-    header += ["measurement", "geometry"]
+    header += [RECIPE_FIELD] * bool(recipes) + ["measurement", "geometry"]
     lines.append(_csv_row(header + [_fmt(w) for w in measurements.wavelength_nm]))
     for s in measurements.samples:
         _check_text(s.name, "sample name")
@@ -122,6 +211,7 @@ def format_csv(measurements):
         _check_text(s.film_group or "", "film group")
         fixed = [s.name, s.role, substrate, s.film_group or "", "yes" if s.opaque else "no"]
         fixed += ["" if getattr(s, c) is None else _fmt(getattr(s, c)) for c in optional]
+        fixed += [recipes.get(s.name, "")] * bool(recipes)
         for m in s.measurements:
             lines.append(_csv_row(fixed + [m.kind, m.label] + [_fmt(v) for v in m.values]))
     return "".join(lines)
