@@ -19,6 +19,7 @@ directional–hemispherical reflectances of an 8°/d integrating sphere.
 
 from __future__ import annotations
 
+import math
 import re
 from itertools import pairwise
 from pathlib import Path
@@ -243,31 +244,97 @@ def read_spectral_table(path, *, units="percent", progress=None):
     return np.array(wavelength_nm), spectra
 
 
+_MIXTURE_SYNTAX = "expected '<id><TAB><pigment>-<pigment>|<ratio>-<ratio>'"
+
+
 def _read_mixtures(path):
-    """Revigo ``<id>\\t<pigment>-<pigment>|<ratio>-<ratio>`` lines -> id -> composition dict."""
-    compositions = {}
+    """Revigo ``<id>\\t<pigment>-<pigment>|<ratio>-<ratio>`` lines -> id -> composition dict.
+
+    Raises
+    ------
+    MeasurementError
+        Listing every bad line with the file, row and field (``id``, ``pigments``,
+        ``ratios``): a line not in that form, an empty pigment name, a ratio that is not a
+        finite number, all ratios zero, as many ratios as pigments, an id given twice.
+    """
+    compositions, rows, problems = {}, {}, []
+    file = str(path)
     for row, line in enumerate(load(path).lines("spectral_table"), start=1):
         if not line.strip():
             continue
-        film_id, _, spec = line.partition("\t")
-        names, _, ratios = spec.strip().partition("|")
-        pigments, parts = names.split("-"), ratios.split("-")
+        film_id, tab, spec = line.partition("\t")
+        names, bar, ratios = spec.strip().partition("|")
+        film_id = film_id.strip()
+        if not tab or not bar or not film_id:
+            field = "id" if not tab or not film_id else "ratios"
+            problems.append(
+                Problem(
+                    f"cannot read composition {line.strip()!r}: {_MIXTURE_SYNTAX}",
+                    file=file,
+                    row=row,
+                    field=field,
+                )
+            )
+            continue
+        pigments, parts = [p.strip() for p in names.split("-")], ratios.split("-")
+        if not all(pigments):
+            problems.append(
+                Problem(
+                    f"empty pigment name in {names!r}: {_MIXTURE_SYNTAX}",
+                    file=file,
+                    row=row,
+                    field="pigments",
+                )
+            )
+            continue
         try:
             mass_ratios = [parse_number(p) for p in parts]
         except ValueError as error:
-            raise MeasurementError(
-                Problem(str(error), file=str(path), row=row, field="ratios")
-            ) from None
-        if len(pigments) != len(mass_ratios) or not film_id.strip():
-            raise MeasurementError(
+            problems.append(Problem(str(error), file=file, row=row, field="ratios"))
+            continue
+        bad = next((r for r in mass_ratios if not math.isfinite(r)), None)
+        if bad is not None:
+            problems.append(
                 Problem(
-                    f"cannot read composition {line.strip()!r}: expected "
-                    "'<id><TAB><pigment>-<pigment>|<ratio>-<ratio>'",
-                    file=str(path),
+                    f"mass ratio {bad!r} in {ratios.strip()!r} is not a finite number",
+                    file=file,
                     row=row,
+                    field="ratios",
                 )
             )
-        compositions[film_id.strip()] = {"pigments": pigments, "mass_ratios": mass_ratios}
+        elif len(pigments) != len(mass_ratios):
+            problems.append(
+                Problem(
+                    f"{len(pigments)} pigments but {len(mass_ratios)} ratios in "
+                    f"{line.strip()!r}: {_MIXTURE_SYNTAX}",
+                    file=file,
+                    row=row,
+                    field="ratios",
+                )
+            )
+        elif not any(mass_ratios):
+            problems.append(
+                Problem(
+                    f"all mass ratios of {film_id!r} are zero; a film needs at least one pigment",
+                    file=file,
+                    row=row,
+                    field="ratios",
+                )
+            )
+        elif film_id in compositions:
+            problems.append(
+                Problem(
+                    f"film {film_id!r} is already given in row {rows[film_id]}",
+                    file=file,
+                    row=row,
+                    field="id",
+                )
+            )
+        else:
+            compositions[film_id] = {"pigments": pigments, "mass_ratios": mass_ratios}
+            rows[film_id] = row
+    if problems:
+        raise MeasurementError(problems)
     return compositions
 
 
