@@ -107,6 +107,7 @@ __all__ = [
     "density_of",
     "film_recipes",
     "paste_density",
+    "split_film_groups",
 ]
 
 _GS = "Gettens & Stout, Painting Materials (1966), table of physical properties of pigments"
@@ -122,15 +123,19 @@ _DENSITY_TABLE = {
     "ViridianGreen": (3.32, f"{_GS}: viridian (transparent chromium oxide), Cr2O3.2H2O"),
     "EmeraldGreen": (
         3.3,
-        "approximate: copper aceto-arsenite Cu(C2H3O2)2.3Cu(AsO2)2, reported about 3.3 "
-        "(E. W. Fitzhugh (ed.), Artists' Pigments vol. 3, 1997); not checked against the "
-        "handbook here, override when it matters",
+        (
+            "approximate: copper aceto-arsenite Cu(C2H3O2)2.3Cu(AsO2)2, reported about 3.3 "
+            "(E. W. Fitzhugh (ed.), Artists' Pigments vol. 3, 1997); not checked against the "
+            "handbook here, override when it matters"
+        ),
     ),
     "UltramarineBlue": (2.34, f"{_GS}: ultramarine blue (artificial)"),
     "CobaltBlue": (
         4.4,
-        "crystallographic: spinel CoAl2O4, M = 176.9 g/mol, a = 8.104 Angstrom, Z = 8 "
-        "-> 4.42 g/cm^3 (commercial cobalt blues reported 3.8-4.5)",
+        (
+            "crystallographic: spinel CoAl2O4, M = 176.9 g/mol, a = 8.104 Angstrom, Z = 8 "
+            "-> 4.42 g/cm^3 (commercial cobalt blues reported 3.8-4.5)"
+        ),
     ),
     "PrussianBlue": (1.83, f"{_GS}: Prussian blue, Fe4[Fe(CN)6]3"),
     "BariumSulphate": (4.45, f"{_GS}: barytes (natural BaSO4; blanc fixe 4.36; CRC 4.49)"),
@@ -141,8 +146,10 @@ _DENSITY_TABLE = {
     ),
     "Cochineal": (
         2.45,
-        f"assumed lake on hydrated alumina (carmine lake): {_GS}: aluminum hydrate Al(OH)3 "
-        "(dye ignored)",
+        (
+            f"assumed lake on hydrated alumina (carmine lake): {_GS}: aluminum hydrate Al(OH)3 "
+            "(dye ignored)"
+        ),
     ),
 }
 
@@ -177,14 +184,17 @@ def _check_name(name):
 
 def _check_amount(name, amount):
     if isinstance(amount, bool) or not isinstance(amount, numbers.Real):
-        raise ValueError(f"recipe: the amount of {name!r} must be a number, got {amount!r}")
+        # one error type for every bad amount a user can give (the brief: ValueError)
+        raise ValueError(f"recipe: the amount of {name!r} must be a number, got {amount!r}")  # noqa: TRY004
     value = float(amount)
     if math.isnan(value):
         raise ValueError(f"recipe: the amount of {name!r} is NaN; give a number >= 0")
     if math.isinf(value):
         raise ValueError(f"recipe: the amount of {name!r} must be finite, got {value!r}")
     if value < 0:
-        raise ValueError(f"recipe: the amount of {name!r} is negative ({value:g}); amounts are >= 0")
+        raise ValueError(
+            f"recipe: the amount of {name!r} is negative ({value:g}); amounts are >= 0"
+        )
     return value
 
 
@@ -290,7 +300,7 @@ class Recipe:
             an amount is bad (as :meth:`from_mapping`).
         """
         if not isinstance(composition, Mapping):
-            raise ValueError(
+            raise ValueError(  # noqa: TRY004 -- metadata read from a file: a bad recipe
                 "recipe: a composition must be a mapping with 'pigments' and 'mass_ratios', got "
                 f"{type(composition).__name__}"
             )
@@ -303,7 +313,7 @@ class Recipe:
         pigments, ratios = composition["pigments"], composition["mass_ratios"]
         for key, value in (("pigments", pigments), ("mass_ratios", ratios)):
             if isinstance(value, str) or not isinstance(value, Sequence):
-                raise ValueError(f"recipe: the composition's {key!r} must be a list")
+                raise ValueError(f"recipe: the composition's {key!r} must be a list")  # noqa: TRY004
         if len(pigments) != len(ratios):
             raise ValueError(
                 f"recipe: the composition has {len(pigments)} pigments but {len(ratios)} "
@@ -350,7 +360,9 @@ def base_pigment(name, table=DEFAULT_DENSITIES):
     for key in table:
         if len(name) > len(key) and name.startswith(key):
             following = name[len(key)]
-            if (following.isupper() or following.isdigit()) and (best is None or len(key) > len(best)):
+            if (following.isupper() or following.isdigit()) and (
+                best is None or len(key) > len(best)
+            ):
                 best = key
     return best
 
@@ -359,16 +371,18 @@ def _value_table(values, what):
     if values is None:
         return {}
     if not isinstance(values, Mapping):
-        raise TypeError(f"{what} must be a mapping of pigment name -> value, got "
-                        f"{type(values).__name__}")
+        raise TypeError(
+            f"{what} must be a mapping of pigment name -> value, got {type(values).__name__}"
+        )
     out = {}
     for name, value in values.items():
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
-            raise ValueError(f"{what}: the value of {name!r} must be a number, got {value!r}")
+            raise ValueError(f"{what}: the value of {name!r} must be a number, got {value!r}")  # noqa: TRY004
         value = float(value)
         if not math.isfinite(value) or value <= 0:
-            raise ValueError(f"{what}: the value of {name!r} must be a finite number > 0, got "
-                             f"{value!r}")
+            raise ValueError(
+                f"{what}: the value of {name!r} must be a finite number > 0, got {value!r}"
+            )
         out[name] = value
     return out
 
@@ -476,6 +490,41 @@ def concentrations(recipe, pigments, *, densities=None, drying=None):
     return out
 
 
+def split_film_groups(measurements):
+    """One measurement set per film group, each with its recipe as ``metadata["composition"]``.
+
+    A bayespig CSV file may hold several films (film groups) with recipes of their own
+    (``metadata["compositions"]``, film group -> composition); a film of the library is one
+    set whose films share one film group. Each set keeps the substrate samples its films
+    refer to and the other metadata.
+
+    Parameters
+    ----------
+    measurements : MeasurementSet
+
+    Returns
+    -------
+    dict
+        Film group -> MeasurementSet, in the order of the groups; a group without a recipe
+        has no ``composition``.
+    """
+    from_groups = measurements.metadata.get("compositions")
+    shared = measurements.metadata.get("composition")
+    out = {}
+    for group, films in measurements.film_groups.items():
+        part = measurements.select([f.name for f in films])
+        metadata = {
+            k: v for k, v in part.metadata.items() if k not in ("composition", "compositions")
+        }
+        composition = from_groups.get(group) if isinstance(from_groups, Mapping) else shared
+        if composition is not None:
+            metadata["composition"] = composition
+        out[group] = type(part)(
+            part.wavelength_nm, part.samples, n=part.n, metadata=metadata, source=part.source
+        )
+    return out
+
+
 def film_recipes(sets):
     """The recipe of each film from its ``metadata["composition"]``.
 
@@ -493,8 +542,9 @@ def film_recipes(sets):
     Raises
     ------
     ValueError
-        Naming the film: no composition, a set holding several film groups with different
-        recipes (``metadata["compositions"]``), or a bad composition.
+        Naming the film: no composition, a set holding several film groups with recipes of
+        their own (``metadata["compositions"]``: split it with :func:`split_film_groups`), or
+        a bad composition.
     TypeError
         When ``sets`` is not a mapping.
     """
@@ -513,8 +563,8 @@ def film_recipes(sets):
             if "compositions" in metadata:
                 groups = ", ".join(map(repr, metadata["compositions"]))
                 raise ValueError(
-                    f"film {film_id!r} holds several film groups with different recipes "
-                    f"({groups}); give one measurement set per film group"
+                    f"film {film_id!r} has one recipe per film group ({groups}), not one for the "
+                    "whole set; split it with split_film_groups"
                 )
             raise ValueError(
                 f"film {film_id!r} has no recipe (no 'composition' in its metadata): read the "

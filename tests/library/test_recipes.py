@@ -20,6 +20,7 @@ from bayespig.library.recipes import (
     density_of,
     film_recipes,
     paste_density,
+    split_film_groups,
 )
 
 REVIGO = Path(
@@ -367,6 +368,8 @@ def test_film_recipes_of_a_revigo_folder(tmp_path):
     assert list(found) == ["P1", "P2"]
     assert found["P1"] == Recipe.from_mapping({"PrussianBlue": 50.7, "ZincWhite": 49.3})
     assert found["P2"] == Recipe({"ZincWhiteLinseed": 1.0})
+    sets = read_revigo(folder)
+    assert split_film_groups(sets["P1"]) == {"P1": sets["P1"]}  # one film: itself, cards kept
 
 
 def test_film_recipes_name_the_film_when_missing_or_bad(tmp_path):
@@ -391,9 +394,12 @@ def test_film_recipes_name_the_film_when_missing_or_bad(tmp_path):
         "g,film,black,B,BoneBlack:1,brdf,45as15,0.01\n"
     )
     assert message_of(ValueError, film_recipes, {"F": read_csv(path)}) == (
-        "film 'F' holds several film groups with different recipes ('A', 'B'); give one "
-        "measurement set per film group"
+        "film 'F' has one recipe per film group ('A', 'B'), not one for the whole set; split "
+        "it with split_film_groups"
     )
+    films = split_film_groups(read_csv(path))
+    assert list(films) == ["A", "B"] and films["B"].sample_names == ("g",)
+    assert film_recipes(films) == {"A": Recipe({"ZincWhite": 1.0}), "B": Recipe({"BoneBlack": 1.0})}
     assert (
         message_of(TypeError, film_recipes, [sets["P1"]])
         == "sets must be a mapping of film id -> MeasurementSet, got list"
