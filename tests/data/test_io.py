@@ -91,7 +91,7 @@ def _doc_examples():
 
 def test_documented_examples_are_valid_files(tmp_path):
     tables, e1392_files = _doc_examples()
-    assert len(tables) == 4 and len(e1392_files) == 1
+    assert len(tables) == 5 and len(e1392_files) == 1
     for k, text in enumerate(tables):
         path = tmp_path / f"example{k}.{'txt' if text.startswith('Name') else 'csv'}"
         path.write_text(text)
