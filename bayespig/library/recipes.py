@@ -38,10 +38,11 @@ e.g. in a 50/50 tint with zinc white against its masstone:
 0.755 0.245
 
 With equal densities both would be 0.5. Zinc white (5.65 g/cm^3) takes a quarter of the
-tint's volume, Prussian blue (1.83 g/cm^3) three quarters: relative to the white, the tint
-holds 0.755 / 0.245 = 3.09 (= 5.65 / 1.83) times more blue than the mass ratio says.
-Within one film the ratio ``D_i / D_j`` stays the mass ratio (``tint[0] / tint[1]`` is 1):
-per-pigment factors cancel against the extinctions, only the film's total volume changes.
+tint's volume, Prussian blue (1.83 g/cm^3) three quarters, so against their masstones the tint
+holds 0.755 / 0.245 = 3.09 (= 5.65 / 1.83) times more blue per white than the mass ratio says.
+Within one film ``D_i / D_j`` is still the mass ratio (``tint[0] / tint[1]`` is 1: with
+``C_pp / mu = 1``, ``D`` counts mass per volume); the densities act through each film's volume,
+which is what a pigment's constants, learned from films of other recipes, see.
 (``reports/revigo.md`` suspects this mass-for-volume confusion as a cause of its tint misses.)
 
 The defaults
@@ -49,10 +50,9 @@ The defaults
 ``DEFAULT_DENSITIES`` holds the dry density of the pure pigments [g/cm^3]; the source of each
 value is in ``DENSITY_SOURCES``. The densities :func:`concentrations` needs are those of the
 paints *as mixed* (pigment pastes); the Revigo data do not give the pastes' oil contents, so the
-default takes each paste to be its pigment (the volume fraction of the pigment in its paste is
-then the same for all pastes). When a paste's pigment mass fraction ``c`` is known,
+default takes each paste to be its pigment. When a paste's pigment mass fraction ``c`` is known,
 :func:`paste_density` gives its dry density, to pass in ``densities``. Drying coefficients
-default to 1 (no loss on drying), as the paper's Revigo-like data give none.
+default to 1 (no loss on drying): the Revigo data give none.
 
 A pigment's density is looked up by this rule, first in the user's ``densities`` then in
 ``DEFAULT_DENSITIES``:
