@@ -244,3 +244,12 @@ def test_bad_specification_lines_name_file_row_and_field(tmp_path, line, field, 
     with pytest.raises(MeasurementError) as info:
         read_revigo(tmp_path)
     assert str(info.value) == f"{spec}, row 2, field {field!r}: {message}"
+
+
+def test_a_final_semicolon_and_spaces_are_accepted(tmp_path):
+    text = RECIPE_FILE.replace("ZincWhite:90;BoneBlack:10,", " ZincWhite: 90 ;BoneBlack :10; ,")
+    ms = read_csv(write(tmp_path, text))
+    assert ms.metadata["composition"] == {
+        "pigments": ["ZincWhite", "BoneBlack"],
+        "mass_ratios": [90.0, 10.0],
+    }
