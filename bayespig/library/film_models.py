@@ -552,7 +552,7 @@ class KubelkaMunkFilm(FilmPredictor):
 FILM_MODELS = {RadiativeTransferModel.name: RadiativeTransferModel, KubelkaMunkModel.name: KubelkaMunkModel}
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _default_model(name):
     return FILM_MODELS[name]()
 
