@@ -127,7 +127,7 @@ def _substrate_in_air(substrate, shape):
     if substrate is None:
         raise ValueError("substrate is needed for a film that does not hide its card: the card's "
                          "reflectance measured in air, one value per wavelength (fraction)")
-    value = real_array("substrate", substrate, low=0.0)
+    value = real_array("substrate", substrate, low=0.0, high=1.0, unit="(a fraction; percent / 100)")
     n_draws, n_wl = shape
     if value.shape not in ((n_wl,), (n_draws, n_wl)):
         raise ValueError(f"substrate must have shape ({n_wl},) or ({n_draws}, {n_wl}) (card "
@@ -479,7 +479,7 @@ class KubelkaMunkModel(FilmModel):
         if np.isfinite(h).any():
             card = _substrate_in_air(substrate, K.shape)
             k1, k2, specular = saunderson
-            background = np.minimum(km.saunderson_to_internal(np.minimum(card, 1.0), k1, k2, specular=specular), 1.0)
+            background = np.minimum(km.saunderson_to_internal(card, k1, k2, specular=specular), 1.0)
         return self._measured(K, S, h[:, None], background, saunderson)
 
 

@@ -114,6 +114,10 @@ def test_bad_arguments_are_named(rng):
         model.reflectance(c, [0.5, 0.5], np.ones(2), **call)
     with pytest.raises(ValueError, match=r"substrate must have shape \(4,\) or \(3, 4\)"):
         model.reflectance(c, [0.5, 0.5], np.ones(3), substrate=np.ones(5), instrument="8d-sce")
+    for name in FILM_MODELS:  # a card in percent is refused, not clipped to 1
+        with pytest.raises(ValueError, match=r"substrate must be in \[0, 1\] \(a fraction; percent / 100\), "
+                                             "got values from 50 to 50"):
+            film_model(name).reflectance(c, [0.5, 0.5], np.ones(3), substrate=card * 100, instrument="8d-sce")
     with pytest.raises(ValueError, match="substrate is needed for a film that does not hide its card"):
         model.reflectance(c, [0.5, 0.5], np.ones(3), substrate=None, instrument="8d-sce")
     with pytest.raises(ValueError, match="has 6 channels"):
@@ -282,7 +286,10 @@ def test_saunderson_constants_of_a_glass_like_binder():
     assert abs(k1 - ((1.5 - 1.0) / 2.5) ** 2) < K1_8_DEGREES_TOL  # 0.04: Fresnel at normal incidence
     assert abs(k1 - fresnel(np.cos(np.radians(8.0)), 1.5)) < CLOSED_FORM_TOL
     assert abs(k2 - 0.596) < JUDD_TOL  # Judd (1942), internal diffuse reflectance, n = 1.5
-    assert model.saunderson(get_instrument("45-0").channels[0], 1.5)[2] == "excluded"
+    k1_45, _, specular_45 = model.saunderson(get_instrument("45-0").channels[0], 1.5)
+    assert specular_45 == "excluded"
+    assert abs(k1_45 - fresnel(np.cos(np.radians(45.0)), 1.5)) < CLOSED_FORM_TOL
+    assert film_model(model) is model
 
 
 @pytest.mark.parametrize("instrument, included", [("8d-sce", False), ("8d-sci", True)])
