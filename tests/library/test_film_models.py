@@ -403,3 +403,51 @@ def test_km_revigo_film_is_the_recipe_over_its_measured_cards(revigo, rng):
         expected = model.reflectance(constants, D, h, substrate=ms.sample(card).reflectance[:, 0],
                                      instrument="8d-sce")
         np.testing.assert_allclose(values[..., column], expected, rtol=CLOSED_FORM_TOL)
+
+
+def simulated(design, instrument):
+    from bayespig.data.simulate import FilmSpec
+
+    designs = {
+        "opaque only": [FilmSpec("opaque", opaque=True)],
+        "measured cards": [FilmSpec("on_dark", substrate=0.05, film_group="film", measure_substrate=True),
+                           FilmSpec("on_light", substrate=0.8, film_group="film", measure_substrate=True)],
+    }
+    wavelengths = np.linspace(400.0, 700.0, 4)
+    return bayespig.simulate(a=np.linspace(0.05, 0.5, 4), tau=np.linspace(0.5, 4.0, 4),
+                             design=designs.get(design, design), instrument=instrument,
+                             wavelengths=wavelengths, eps=0.0)
+
+
+@pytest.mark.parametrize("design, instrument", [("method1", "8d-sce"), ("method2", "8d-sci"),
+                                                ("opaque only", "8d-sce"), ("measured cards", "45-0")])
+def test_rt_film_of_any_design_is_the_inference_forward_model(design, instrument, rng):
+    """Opaque films (tau = inf whatever h), films on glass (specular transmittance) and a set
+    without any finite film all go through the inference's evaluator unchanged."""
+    measurements = simulated(design, instrument)
+    film = film_model("radiative-transfer").for_film(measurements)
+    constants = rt_constants(rng, 4, measurements.n_wavelengths, 1)
+    h = rng.uniform(0.3, 3.0, 4)
+    predicted = film.values(constants, [1.0], h)
+    a, tau = constants[..., 0, 0], h[:, None] * np.exp(constants[..., 0, 1])
+    direct, _ = forward_model_values(measurements, a, tau)
+    np.testing.assert_allclose(predicted, direct, rtol=SAME_PATH_REL_TOL, atol=0)
+
+
+def test_km_film_over_measured_45_0_cards_is_the_recipe_over_them(rng):
+    measurements = simulated("measured cards", "45-0")
+    model = film_model("kubelka-munk")
+    film = model.for_film(measurements)
+    constants = km_constants(rng, 3, measurements.n_wavelengths, 1)
+    h = rng.uniform(0.5, 2.0, 3)
+    values = film.values(constants, [1.0], h)
+    for column, name in enumerate(film.value_films):
+        card = measurements.sample(measurements.sample(name).substrate).reflectance[:, 0]
+        expected = model.reflectance(constants, [1.0], h, substrate=card, instrument="45-0")
+        np.testing.assert_allclose(values[..., column], expected, rtol=CLOSED_FORM_TOL)
+
+
+def test_km_does_not_model_a_film_on_glass():
+    with pytest.raises(ValueError, match="film 'on_glass:transmittance': Kubelka-Munk does not model the "
+                                         "specular transmittance of a film on glass"):
+        film_model("kubelka-munk").for_film(simulated("method1", "8d-sce"))
