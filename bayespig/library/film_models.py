@@ -342,6 +342,14 @@ class RadiativeTransferModel(FilmModel):
         return RadiativeTransferFilm(self, measurements)
 
     def reflectance(self, constants, concentrations, thickness, *, substrate, instrument, n=1.45):
+        """Predicted reflectance (N, n_wl) of a recipe (see :meth:`FilmModel.reflectance`).
+
+        The card in air becomes its albedo seen from the binder as the data readers do it
+        (:func:`bayespig.physics.substrate.substrate_albedo_from_air`: eq. 9 inverted, for a
+        hemispherical channel its hemispherical integral; a 45/0 reflectance factor as
+        ``pi`` times the BRDF); the film is the instrument's look-up table at the mixture's
+        ``(a, tau)`` over that albedo (the substrate law, eq. 3).
+        """
         constants, D, h = _draw_arguments(constants, concentrations, thickness)
         instrument = _single_channel(instrument, n)
         table = self.table(instrument)
@@ -395,6 +403,8 @@ class RadiativeTransferFilm(FilmPredictor):
         return a, self.model._optical_thickness(h, k_ext, self.tau_max)
 
     def values(self, constants, concentrations, thickness, *, r_s_scale=None):
+        """Predicted values (W, n_wl, n_values) (see :meth:`FilmPredictor.values`): the mixture's
+        ``(a, tau)`` of every draw and wavelength in one call of the inference's evaluator."""
         a, tau = self.optical_thickness(constants, concentrations, thickness)
         n_draws, n_wl = a.shape
         scale = _card_factors(r_s_scale, n_draws, self.n_reflectance_films)
@@ -471,6 +481,12 @@ class KubelkaMunkModel(FilmModel):
         return KubelkaMunkFilm(self, measurements)
 
     def reflectance(self, constants, concentrations, thickness, *, substrate, instrument, n=1.45):
+        """Predicted reflectance (N, n_wl) of a recipe (see :meth:`FilmModel.reflectance`).
+
+        The card in air becomes its internal reflectance by Saunderson's inverse with the
+        instrument's constants and specular mode; the film is Kubelka's layer of thickness
+        ``X = h`` over it, measured through Saunderson's formula.
+        """
         constants, D, h = _draw_arguments(constants, concentrations, thickness)
         instrument = _single_channel(instrument, n)
         saunderson = self.saunderson(instrument.channels[0], instrument.n)
@@ -534,6 +550,8 @@ class KubelkaMunkFilm(FilmPredictor):
             self._opaque.append(film.opaque)
 
     def values(self, constants, concentrations, thickness, *, r_s_scale=None):
+        """Predicted values (W, n_wl, n_values) (see :meth:`FilmPredictor.values`); ``r_s_scale``
+        multiplies each reflectance film's internal card reflectance."""
         constants, D, h = _draw_arguments(constants, concentrations, thickness, self.problem.n_wavelengths)
         K, S = self.model.mixture(constants, D)
         scale = _card_factors(r_s_scale, K.shape[0], self.n_reflectance_films)
