@@ -20,6 +20,9 @@ from bayespig.studies.revigo import default_revigo_path
 #: The film predictor evaluates the ForwardModel's own fast path and interpolant: equal to
 #: rounding (measured 3.1e-15 against ForwardModel.predict on Revigo 06B).
 SAME_PATH_REL_TOL = 1e-12
+#: infer stores its predictions in single precision: round to nearest, 2^-24 relative (measured
+#: 5.4e-8 on Revigo 06B at 550 nm); the bound is one float32 ulp, 2^-23.
+FLOAT32_REL_TOL = 2.0**-23
 #: Two evaluations of one closed form (or of one interpolant) in a different order: rounding.
 CLOSED_FORM_TOL = 1e-12
 #: Table against the direct adding-doubling solver: the tables' accuracy claim (issue 3,
@@ -174,6 +177,22 @@ def test_rt_single_pigment_film_is_the_inference_forward_model(simulated_film, r
 def test_rt_single_pigment_revigo_film_is_the_inference_forward_model(revigo, rng):
     film = _assert_rt_film_is_the_forward_model(revigo["06B"], rng)
     assert film.value_films == ("06B_ob", "06B_ow") and film.value_channels == ("8d-sce", "8d-sce")
+
+
+def test_rt_film_reproduces_what_infer_predicted_at_its_draws():
+    """infer's posterior predictive y at its own draws (a, tau) is the film's prediction with one
+    pigment of a_1 = a, sigma_1 = tau at D = 1, h = 1."""
+    film_set = bayespig.simulate(a=0.2, tau=3.0, design="method4", instrument="8d-sce",
+                                 wavelengths=[550.0], eps=0.02, seed=3)
+    idata = bayespig.infer(film_set, progress=False, seed=1)
+    a = idata.posterior["a"].values.reshape(-1)
+    tau = idata.posterior["tau"].values.reshape(-1)
+    y = idata.posterior_predictive["y"].values.reshape(a.size, -1)
+    film = film_model("radiative-transfer").for_film(film_set)
+    constants = np.stack([a, np.log(tau)], axis=-1)[:, None, None, :]
+    predicted = film.values(constants, [1.0], np.ones(a.size))[:, 0, :]
+    np.testing.assert_allclose(predicted, y, rtol=FLOAT32_REL_TOL, atol=0)
+    np.testing.assert_array_equal(film.observed, idata.observed_data["y"].values)
 
 
 def test_rt_card_factors_scale_the_albedo_as_the_inference_does(simulated_film, rng):
