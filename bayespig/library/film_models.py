@@ -168,8 +168,11 @@ class FilmPredictor(abc.ABC):
         The sample each value column belongs to.
     value_channels : tuple of str
         The channel label of each value column.
+    eps : numpy.ndarray
+        Shape (n_values,): each value's known relative error (its sample's ``eps``), NaN where
+        the set does not give one.
     n_reflectance_films : int
-        Reflectance films (the columns of ``r_s_scale``).
+        Reflectance films (the columns of ``r_s_scale``), in problem order.
     problem : Problem
         The film's problem (the inference's view of it).
     """
@@ -188,6 +191,12 @@ class FilmPredictor(abc.ABC):
             channels.extend(labels)
         self.value_films, self.value_channels = tuple(films), tuple(channels)
         self.n_reflectance_films = sum(f.kind == "reflectance" for f in problem.films)
+        self.eps = problem.known_eps(None)
+
+    @property
+    def n_wavelengths(self):
+        """Number of wavelengths."""
+        return self.wavelength_nm.size
 
     @property
     def n_values(self):

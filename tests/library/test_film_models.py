@@ -170,7 +170,8 @@ def _assert_rt_film_is_the_forward_model(measurements, rng, n_draws=6):
 
 def test_rt_single_pigment_film_is_the_inference_forward_model(simulated_film, rng):
     film = _assert_rt_film_is_the_forward_model(simulated_film, rng)
-    assert film.n_reflectance_films == 2
+    assert film.n_reflectance_films == 2 and film.n_wavelengths == simulated_film.n_wavelengths
+    assert film.eps.shape == (2,) and np.isnan(film.eps).all()  # the set gives no per-sample eps
 
 
 @needs_revigo
