@@ -179,7 +179,8 @@ class FilmPredictor(abc.ABC):
 
     def __init__(self, measurements):
         problem = Problem.from_measurements(measurements, method="general")
-        _one_film_group(problem, measurements.source or f"film {measurements.metadata.get('film_id', '')}".strip())
+        film_id = measurements.metadata.get("film_id")
+        _one_film_group(problem, f"film {film_id!r}" if film_id else (measurements.source or "measurement set"))
         self.problem = problem
         self.wavelength_nm = np.asarray(problem.wavelength_nm, dtype=float)
         self.observed = np.concatenate([np.asarray(f.observed, dtype=float) for f in problem.films], axis=1)

@@ -144,7 +144,8 @@ def test_a_set_of_two_film_groups_is_not_one_film(simulated_film):
     other = [s for s in simulated_film.samples if s.role != "film"]
     two_groups = MeasurementSet(simulated_film.wavelength_nm, other + renamed, n=simulated_film.n)
     for name in FILM_MODELS:
-        with pytest.raises(ValueError, match="a film is one film group .* this set has 2: group-0, group-1"):
+        with pytest.raises(ValueError, match="^measurement set: a film is one film group .* this set has 2: "
+                                             "group-0, group-1$"):
             film_model(name).for_film(two_groups)
 
 
