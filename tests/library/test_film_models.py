@@ -472,3 +472,15 @@ def test_km_does_not_model_a_film_on_glass():
     with pytest.raises(ValueError, match="film 'on_glass:transmittance': Kubelka-Munk does not model the "
                                          "specular transmittance of a film on glass"):
         film_model("kubelka-munk").for_film(simulated("method1", "8d-sce"))
+
+
+@pytest.mark.parametrize("name", sorted(FILM_MODELS))
+def test_a_card_per_draw_is_each_draw_over_its_own_card(name, rng):
+    model = film_model(name)
+    constants = (rt_constants if name == "radiative-transfer" else km_constants)(rng, 3, 4, 2)
+    cards = rng.uniform(0.1, 0.8, (3, 4))
+    h = rng.uniform(0.5, 2.0, 3)
+    together = model.reflectance(constants, [0.5, 0.5], h, substrate=cards, instrument="8d-sce")
+    one_by_one = np.array([model.reflectance(constants[j:j + 1], [0.5, 0.5], h[j:j + 1], substrate=cards[j],
+                                             instrument="8d-sce")[0] for j in range(3)])
+    np.testing.assert_allclose(together, one_by_one, rtol=CLOSED_FORM_TOL, atol=0)
