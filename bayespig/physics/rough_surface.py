@@ -22,7 +22,8 @@ kernel appears between smooth functions of the binder direction: the layer's ``R
 and the radiance ``U(mu)``. Those are represented by their polynomial interpolants on the
 Gauss nodes of each quadrature interval (in ``mu`` below the critical cosine, in ``s`` with
 ``mu = mu_c + (1 - mu_c) s^2`` above it, the variables of the binder quadrature), with Lagrange
-basis ``l_j``, and the kernels are integrated against that basis on fine rules graded towards
+basis ``l_j`` (times ``sin(theta) / sin(theta_j)`` in the odd azimuthal modes, whose
+``R_m`` and ``U_m`` carry a factor ``sin^m(theta)``, not smooth in ``mu`` at the normal), and the kernels are integrated against that basis on fine rules graded towards
 their peaks (product integration; Atkinson, *The Numerical Solution of Integral Equations of
 the Second Kind*, 1997, section 4.2):
 
@@ -41,8 +42,9 @@ accuracy no longer depends on ``alpha`` but on how well the interpolants represe
 Gauss-Legendre panels in the polar angle ``theta`` (the peaks are smooth in ``theta``, not in
 ``mu`` near the normal), halving in width towards each peak down to :data:`FINEST_PANEL` ``*
 alpha``, and split where an integrand is not smooth: the critical angle (where the basis
-changes interval and the facets start to reflect totally) and where a refracted or reflected
-ray grazes its facet at ``psi = 0`` or ``pi``.
+changes interval and the facets start to reflect totally), where a refracted or reflected
+ray grazes its facet at ``psi = 0`` or ``pi``, and (transmission) where the facets refracting
+into a direction turn horizontal.
 
 The weights depend on ``alpha``, ``n``, the quadrature and (for ``A_in``, ``A_out``) the air
 directions only, not on the layer: :func:`rough_interface` caches them.
@@ -59,6 +61,7 @@ from .adding_doubling import START_THICKNESS, START_THICKNESS_HIGHER_MODES, laye
 from .discrete_ordinates import THIN_LAYER, layer_mode_eigen
 from .fresnel import critical_cosine
 from .microfacet import (
+    AZIMUTH_POINTS_PER_PANEL,
     _smoothstep_panels,
     directional_albedo,
     reflection_modes,
@@ -84,7 +87,7 @@ CACHE_SIZE = 8
 _HALF_PI = 0.5 * np.pi
 
 
-def _graded_rule(peaks, breaks, finest):
+def _graded_rule(peaks, breaks, finest, points=PANEL_POINTS):
     """Nodes and weights in ``theta`` over (0, pi/2) for ``int h(theta) dtheta``: panels split at
     ``breaks`` and halving in width towards each of ``peaks`` (and the breaks) down to
     ``finest``; each panel Gauss-Legendre in the smoothstep variable (square-root ends smooth)."""
@@ -97,7 +100,7 @@ def _graded_rule(peaks, breaks, finest):
             edges.extend((centre - width, centre + width))
             width *= 2.0
     edges = np.unique(np.clip(edges, 0.0, _HALF_PI))
-    theta, weight = _smoothstep_panels(edges, PANEL_POINTS)
+    theta, weight = _smoothstep_panels(edges, points)
     keep = weight > 0.0
     return theta[keep], weight[keep]
 
@@ -112,9 +115,12 @@ class _LagrangeBasis:
         unit = 0.5 * (x + 1.0)
         self.lower = BarycentricInterpolator(self.mu_c * unit, np.eye(n_points))
         self.upper = BarycentricInterpolator(unit, np.eye(n_points))
+        mu_nodes = np.concatenate([self.mu_c * unit, self.mu_c + (1.0 - self.mu_c) * unit * unit])
+        self.sine_nodes = np.sqrt(1.0 - mu_nodes * mu_nodes)
 
-    def __call__(self, mu):
-        """``l_j(mu)``, shape (F, 2 n_points), for cosines ``mu`` (F,)."""
+    def __call__(self, mu, odd=False):
+        """``l_j(mu)``, shape (F, 2 n_points), for cosines ``mu`` (F,); with ``odd``, the basis
+        ``l_j(mu) sin(theta) / sin(theta_j)`` of the odd azimuthal modes."""
         mu = np.asarray(mu, dtype=float)
         p = self.n_points
         out = np.zeros((mu.size, 2 * p))
@@ -124,7 +130,13 @@ class _LagrangeBasis:
         if (~low).any():
             s = np.sqrt(np.clip((mu[~low] - self.mu_c) / (1.0 - self.mu_c), 0.0, None))
             out[~low, p:] = self.upper(s)
+        if odd:
+            out *= np.sqrt(np.clip(1.0 - mu * mu, 0.0, None))[:, None] / self.sine_nodes
         return out
+
+    def both(self, mu):
+        """The even and odd modes' bases at ``mu``."""
+        return self(mu), self(mu, odd=True)
 
 
 class RoughInterface:
@@ -139,6 +151,11 @@ class RoughInterface:
     n_points : int
         Gauss points per interval of :func:`~bayespig.physics.quadrature.binder_quadrature`.
     distribution : {"ggx", "beckmann"}
+    finest_panel, panel_points : float, int
+        The fine rules' :data:`FINEST_PANEL` and :data:`PANEL_POINTS` (for convergence studies).
+    azimuth_points : int
+        Gauss points per azimuth panel of the kernels' Fourier integrals
+        (:data:`~bayespig.physics.microfacet.AZIMUTH_POINTS_PER_PANEL`).
 
     Attributes
     ----------
@@ -148,28 +165,30 @@ class RoughInterface:
         ``e_j = int T_out(mu) l_j(mu) mu dmu``, (q,) [-]: upward energy leaving into air.
     """
 
-    def __init__(self, alpha, n, n_points, distribution="ggx"):
+    def __init__(self, alpha, n, n_points, distribution="ggx", finest_panel=FINEST_PANEL, panel_points=PANEL_POINTS,
+                 azimuth_points=AZIMUTH_POINTS_PER_PANEL):
         self.alpha, self.n, self.n_points, self.distribution = float(alpha), float(n), int(n_points), distribution
+        self.panel_points, self.azimuth_points = int(panel_points), int(azimuth_points)
         self.mu, self.weight = binder_quadrature(self.n_points, self.n)
         self.c = self.mu * self.weight
         self.basis = _LagrangeBasis(self.n_points, self.n)
         self.theta_c = float(np.arccos(critical_cosine(self.n)))
         # rays refracted through a facet graze it where i.o = -1/n (microfacet.transmission_modes)
         self.theta_graze = float(np.arccos(1.0 / self.n))
-        self.finest = FINEST_PANEL * self.alpha
-        theta, w = _graded_rule([self.theta_c], [self.theta_c], self.finest)
+        self.finest = finest_panel * self.alpha
+        theta, w = _graded_rule([self.theta_c], [self.theta_c], self.finest, self.panel_points)
         self.outer_mu = np.cos(theta)
         self.outer_weight = w * np.sin(theta) * self.outer_mu  # for int h(mu) mu dmu
-        self.outer_basis = self.basis(self.outer_mu)
+        self.outer_basis = self.basis.both(self.outer_mu)
         _, t_out = directional_albedo(self.outer_mu, alpha=self.alpha, n_i=self.n, n_t=1.0,
                                       distribution=distribution)
-        self.escape = (self.outer_weight * t_out) @ self.outer_basis
+        self.escape = (self.outer_weight * t_out) @ self.outer_basis[0]
         self._internal = {}
         self._entering = {}
 
     @property
     def options(self):
-        return {"alpha": self.alpha, "distribution": self.distribution}
+        return {"alpha": self.alpha, "distribution": self.distribution, "points_per_panel": self.azimuth_points}
 
     def internal(self, block):
         """``W[j, k]`` of the modes ``MODE_BLOCK * block ..`` (MODE_BLOCK, q, q) [-]."""
@@ -181,12 +200,17 @@ class RoughInterface:
             for f, mu_f in enumerate(self.outer_mu):
                 theta = float(np.arccos(mu_f))
                 # kinks: facets at the critical angle at psi = 0 (theta + theta' = 2 theta_c) and pi
-                theta_in, w_in = _graded_rule([theta, tc], [tc, tg - theta, theta - tg, theta + tg], self.finest)
+                theta_in, w_in = _graded_rule([theta, tc], [tc, tg - theta, theta - tg, theta + tg], self.finest,
+                                              self.panel_points)
                 mu_in = np.cos(theta_in)
                 kernel = reflection_modes(mu_in, [mu_f], MODE_BLOCK, n_i=self.n, n_t=1.0, first_mode=first,
                                           **self.options)[:, :, 0]
-                rows[:, f] = (kernel * (w_in * np.sin(theta_in) * mu_in)) @ self.basis(mu_in)
-            W = np.einsum("f,fj,mfk->mjk", self.outer_weight, self.outer_basis, rows)
+                weighted = kernel * (w_in * np.sin(theta_in) * mu_in)
+                bases = self.basis.both(mu_in)
+                for k in range(MODE_BLOCK):
+                    rows[k, f] = weighted[k] @ bases[(first + k) % 2]
+            W = np.stack([np.einsum("f,fj,fk->jk", self.outer_weight, self.outer_basis[(first + k) % 2], rows[k])
+                          for k in range(MODE_BLOCK)])
             self._internal[block] = 0.5 * (W + np.swapaxes(W, 1, 2))  # reciprocal; symmetric to round-off
         return self._internal[block]
 
@@ -199,12 +223,19 @@ class RoughInterface:
                 theta_i = float(np.arccos(min(mu_i, 1.0)))
                 theta_t = float(np.arcsin(np.sin(theta_i) / self.n))
                 tg = self.theta_graze
+                # kinks: the refracted ray grazing its facet at psi = 0 or pi, and the facets that
+                # refract into theta turning horizontal (n mu = mu_i: D(m) -> 0 there, not smoothly)
+                theta_flat = float(np.arccos(mu_i / self.n))
                 theta, w = _graded_rule([theta_t, self.theta_c],
-                                        [self.theta_c, theta_i - tg, tg - theta_i, theta_i + tg], self.finest)
+                                        [self.theta_c, theta_i - tg, tg - theta_i, theta_i + tg, theta_flat],
+                                        self.finest, self.panel_points)
                 mu = np.cos(theta)
                 kernel = transmission_modes(mu, [mu_i], MODE_BLOCK, n_i=1.0, n_t=self.n,
                                             first_mode=MODE_BLOCK * block, **self.options)[:, :, 0]
-                self._entering[key] = (kernel * (w * np.sin(theta) * mu)) @ self.basis(mu)
+                weighted = kernel * (w * np.sin(theta) * mu)
+                bases = self.basis.both(mu)
+                self._entering[key] = np.stack([weighted[k] @ bases[(MODE_BLOCK * block + k) % 2]
+                                                for k in range(MODE_BLOCK)])
             out[:, :, i] = self._entering[key]
         return out
 
@@ -214,9 +245,10 @@ class RoughInterface:
 
 
 @functools.lru_cache(maxsize=CACHE_SIZE)
-def rough_interface(alpha, n, n_points, distribution="ggx"):
-    """The cached :class:`RoughInterface` of ``(alpha, n, n_points, distribution)``."""
-    return RoughInterface(alpha, n, n_points, distribution)
+def rough_interface(alpha, n, n_points, distribution="ggx", **rules):
+    """The cached :class:`RoughInterface` of ``(alpha, n, n_points, distribution)`` (and the
+    fine rules' settings ``rules``, keywords of :class:`RoughInterface`)."""
+    return RoughInterface(alpha, n, n_points, distribution, **rules)
 
 
 def _layer(mu, weight, a, tau, p_reflection, p_transmission, thickness):
@@ -256,7 +288,7 @@ def _mode(interface, R, T, direct, A_in, A_out, W, first_mode):
 
 
 def rough_surface_terms(theta_in, theta_out, *, a, tau, g, n, n_points, alpha, n_modes=None,
-                        mode_tolerance=1e-6, distribution="ggx", start_thickness=START_THICKNESS):
+                        mode_tolerance=1e-6, distribution="ggx", start_thickness=START_THICKNESS, rules=None):
     """The substrate-law terms of a layer under a rough surface (body only: the first-surface
     lobe is not in them).
 
@@ -282,13 +314,15 @@ def rough_surface_terms(theta_in, theta_out, *, a, tau, g, n, n_points, alpha, n
     distribution : {"ggx", "beckmann"}
     start_thickness : float
         Start of the doubling, for the layers that take it [-].
+    rules : dict, optional
+        Fine-rule settings passed to :class:`RoughInterface` (convergence studies).
 
     Returns
     -------
     dict
         The fields of :class:`bayespig.physics.forward.SurfaceTerms`.
     """
-    interface = rough_interface(float(alpha), float(n), int(n_points), distribution)
+    interface = rough_interface(float(alpha), float(n), int(n_points), distribution, **(rules or {}))
     mu_in = np.cos(np.radians(np.atleast_1d(np.asarray(theta_in, dtype=float))))
     mu_out = np.cos(np.radians(np.atleast_1d(np.asarray(theta_out, dtype=float))))
     a = np.atleast_1d(np.asarray(a, dtype=float))
