@@ -38,7 +38,7 @@ from .fresnel import fresnel_reflectance, normal_transmittance, refracted_cosine
 from .microfacet import DISTRIBUTIONS, directional_albedo, reflection_brdf
 from .phase import is_rayleigh, n_fourier_modes, normalise_on_quadrature, phase_fourier_modes
 from .quadrature import DEFAULT_QUADRATURE_POINTS, binder_quadrature, default_quadrature_points
-from .rough_surface import rough_surface_terms
+from .rough_surface import ROUGHNESS_MAX, rough_surface_terms
 
 __all__ = [
     "BRDF_PARTS",
@@ -226,14 +226,15 @@ def surface_roughness(roughness):
     Parameters
     ----------
     roughness : float
-        GGX's ``alpha`` of the air/binder surface, one finite real number ``>= 0`` [-]; 0 is
-        the smooth surface.
+        GGX's ``alpha`` of the air/binder surface, one real number in
+        [0, :data:`~bayespig.physics.rough_surface.ROUGHNESS_MAX`] [-]; 0 is the smooth surface.
 
     Returns
     -------
     float
     """
-    message = "roughness (microfacet alpha of the top surface) must be a finite real number >= 0, got "
+    message = (f"roughness (microfacet alpha of the top surface) must be a finite real number in [0, {ROUGHNESS_MAX:g}], "
+               "got ")
     if roughness is None or isinstance(roughness, (str, bytes, bool, np.bool_)):
         raise TypeError(message + _describe(roughness))
     try:
@@ -247,6 +248,10 @@ def surface_roughness(roughness):
                          f"per call), got {_describe(roughness)}")
     if not np.isfinite(value) or value < 0.0:
         raise ValueError(message + f"{float(value):g}")
+    if value > ROUGHNESS_MAX:
+        raise ValueError(message + f"{float(value):g} (beyond {ROUGHNESS_MAX:g} the single-scattering microfacet "
+                         "model loses a third or more of the light it should scatter between facets, and its "
+                         "quadrature is not verified)")
     return float(value)
 
 
@@ -816,10 +821,9 @@ def brdf(theta_i, theta_o, delta_phi, *, a, tau, g=0.0, r_s=0.0, n=1.45, roughne
         GGX ``alpha`` of the top surface [-] (one value per call); 0 is the smooth surface and
         takes exactly the smooth model's code. Below :data:`SMOOTH_BELOW` the body is the smooth
         model's (they agree to < 1e-5 there); with ``n = 1`` the surface is index-matched and
-        scatters nothing. The body's accuracy (1e-4 relative against a converged reference) is
-        stated in reports/validation.md ("Rough surface") for ``roughness`` in
-        [:data:`~bayespig.physics.rough_surface.ROUGHNESS_CONVERGED_MIN`,
-        :data:`~bayespig.physics.rough_surface.ROUGHNESS_CONVERGED_MAX`].
+        scatters nothing. At most :data:`~bayespig.physics.rough_surface.ROUGHNESS_MAX` (1):
+        over [1e-4, 1] the BRDF changes by < 2e-6 (relative) from 16 to 48 quadrature points
+        and by < 4e-6 when the fine rules are refined (benchmarks/rough_surface.py).
     part : {"total", "body", "surface"}, optional
         ``"body"``: the light that entered the layer; ``"surface"``: the first-surface lobe
         (:func:`first_surface_brdf`, Walter's analytic BRDF; 0 on a smooth surface);

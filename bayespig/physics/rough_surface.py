@@ -32,8 +32,10 @@ the Second Kind*, 1997, section 4.2):
   direction ``o``, over ``n^2``: reciprocity of the transmission),
 - ``C r_int C -> W[j, k] = int int l_j(mu) r_int(mu, mu') l_k(mu') mu mu' dmu dmu'``,
 - the escape weights ``e_j = int T_out(mu) l_j(mu) mu dmu`` with ``T_out`` the surface's
-  directional transmittance from the binder (:func:`~bayespig.physics.microfacet.directional_albedo`),
-  for the hemispherical reflectance.
+  directional transmittance from the binder, for the hemispherical reflectance: by reciprocity
+  ``e_j = int A_in[j](mu_o) mu_o dmu_o / n^2``, an integral of the entering weights over air
+  directions (so the hemispherical reflectance is the integral of the BRDF, and independent of
+  :func:`~bayespig.physics.microfacet.directional_albedo`, which the tests compare it with).
 
 Energy is exact up to the fine rules (``sum_j l_j = 1``), the delta limit ``alpha -> 0`` is the
 smooth model with the measurement directions interpolated instead of added as nodes, and the
@@ -63,34 +65,44 @@ from .fresnel import critical_cosine
 from .microfacet import (
     AZIMUTH_POINTS_PER_PANEL,
     _smoothstep_panels,
-    directional_albedo,
     reflection_modes,
     transmission_modes,
 )
 from .phase import n_fourier_modes, normalise_on_quadrature, phase_fourier_modes
 from .quadrature import binder_quadrature
 
-__all__ = ["FINEST_PANEL", "MODE_BLOCK", "PANEL_POINTS", "RoughInterface", "rough_interface",
+__all__ = ["FINEST_PANEL", "MODE_BLOCK", "PANEL_POINTS", "ROUGHNESS_MAX", "RoughInterface", "rough_interface",
            "rough_surface_terms"]
 
-#: Finest panel of the fine rules, as a fraction of ``alpha`` [rad of theta]. The narrowest
-#: peak is the transmission's: ``theta_t`` spreads by ~``alpha (n - 1) / n`` (~0.3 alpha) around
-#: the refracted direction.
+#: Finest panel of the fine rules, as a fraction of ``min(alpha, FINEST_ALPHA_CAP)`` [rad of
+#: theta]. The narrowest peak is the transmission's: ``theta_t`` spreads by ~``alpha (n - 1) / n``
+#: (~0.3 alpha) around the refracted direction.
 FINEST_PANEL = 1.0 / 16.0
+#: Above this roughness the finest panel stops growing: the kinks of the kernels (the breaks of
+#: the rules) carry more weight, and panels of alpha / 16 there left 1e-4 of the escape weights
+#: at alpha = 1 (1e-6 with this cap; benchmarks/rough_surface.py).
+FINEST_ALPHA_CAP = 0.25
 #: Gauss points per panel of the fine rules.
 PANEL_POINTS = 8
 #: Azimuthal modes of the surface kernels computed together (the forward model stops at the
 #: layer's last significant mode).
 MODE_BLOCK = 8
+#: Widest panel [rad] of the rule over air directions of the escape weights.
+AIR_WIDEST_PANEL = np.pi / 16.0
+#: Largest roughness accepted by the forward model: over [1e-4, 1] the quadrature is verified
+#: (benchmarks/rough_surface.py); at alpha = 1 the single-scattering GGX surface already loses
+#: 34-66 % of the light from the binder (benchmarks/microfacet.py).
+ROUGHNESS_MAX = 1.0
 #: Cached sets of interface weights (one per roughness, index, quadrature and distribution).
 CACHE_SIZE = 8
 _HALF_PI = 0.5 * np.pi
 
 
-def _graded_rule(peaks, breaks, finest, points=PANEL_POINTS):
+def _graded_rule(peaks, breaks, finest, points=PANEL_POINTS, widest=_HALF_PI):
     """Nodes and weights in ``theta`` over (0, pi/2) for ``int h(theta) dtheta``: panels split at
     ``breaks`` and halving in width towards each of ``peaks`` (and the breaks) down to
-    ``finest``; each panel Gauss-Legendre in the smoothstep variable (square-root ends smooth)."""
+    ``finest``, none wider than ``widest``; each panel Gauss-Legendre in the smoothstep variable
+    (square-root ends smooth)."""
     edges = [0.0, _HALF_PI]
     inside = [x for x in list(peaks) + list(breaks) if 0.0 <= x <= _HALF_PI]
     edges.extend(inside)
@@ -99,7 +111,8 @@ def _graded_rule(peaks, breaks, finest, points=PANEL_POINTS):
         while width < _HALF_PI:
             edges.extend((centre - width, centre + width))
             width *= 2.0
-    edges = np.unique(np.clip(edges, 0.0, _HALF_PI))
+    edges = np.unique(np.concatenate([np.clip(edges, 0.0, _HALF_PI),
+                                      np.linspace(0.0, _HALF_PI, int(np.ceil(_HALF_PI / widest)) + 1)]))
     theta, weight = _smoothstep_panels(edges, points)
     keep = weight > 0.0
     return theta[keep], weight[keep]
@@ -175,16 +188,20 @@ class RoughInterface:
         self.theta_c = float(np.arccos(critical_cosine(self.n)))
         # rays refracted through a facet graze it where i.o = -1/n (microfacet.transmission_modes)
         self.theta_graze = float(np.arccos(1.0 / self.n))
-        self.finest = finest_panel * self.alpha
+        self.finest = finest_panel * min(self.alpha, FINEST_ALPHA_CAP)
         theta, w = _graded_rule([self.theta_c], [self.theta_c], self.finest, self.panel_points)
         self.outer_mu = np.cos(theta)
         self.outer_weight = w * np.sin(theta) * self.outer_mu  # for int h(mu) mu dmu
         self.outer_basis = self.basis.both(self.outer_mu)
-        _, t_out = directional_albedo(self.outer_mu, alpha=self.alpha, n_i=self.n, n_t=1.0,
-                                      distribution=distribution)
-        self.escape = (self.outer_weight * t_out) @ self.outer_basis[0]
         self._internal = {}
         self._entering = {}
+        # escape: e_j = int T_out(mu) l_j mu dmu with T_out(mu) = int t_out(mu_o, mu) mu_o dmu_o and
+        # t_out(mu_o, mu) = t_in(mu, mu_o) / n^2, so e_j = int A_in[j](mu_o) mu_o dmu_o / n^2 over air
+        # directions, on a rule graded towards grazing (where the refracted light meets mu_c)
+        theta_air, w_air = _graded_rule([_HALF_PI], [], self.finest, self.panel_points, AIR_WIDEST_PANEL)
+        mu_air = np.cos(theta_air)
+        entering = np.stack([self._entering_rule(m, 0, 1)[0] for m in mu_air], axis=-1)  # (q, A)
+        self.escape = entering @ (w_air * np.sin(theta_air) * mu_air) / (self.n * self.n)
 
     @property
     def options(self):
@@ -220,24 +237,27 @@ class RoughInterface:
         for i, mu_i in enumerate(mu_air):
             key = (float(mu_i), block)
             if key not in self._entering:
-                theta_i = float(np.arccos(min(mu_i, 1.0)))
-                theta_t = float(np.arcsin(np.sin(theta_i) / self.n))
-                tg = self.theta_graze
-                # kinks: the refracted ray grazing its facet at psi = 0 or pi, and the facets that
-                # refract into theta turning horizontal (n mu = mu_i: D(m) -> 0 there, not smoothly)
-                theta_flat = float(np.arccos(mu_i / self.n))
-                theta, w = _graded_rule([theta_t, self.theta_c],
-                                        [self.theta_c, theta_i - tg, tg - theta_i, theta_i + tg, theta_flat],
-                                        self.finest, self.panel_points)
-                mu = np.cos(theta)
-                kernel = transmission_modes(mu, [mu_i], MODE_BLOCK, n_i=1.0, n_t=self.n,
-                                            first_mode=MODE_BLOCK * block, **self.options)[:, :, 0]
-                weighted = kernel * (w * np.sin(theta) * mu)
-                bases = self.basis.both(mu)
-                self._entering[key] = np.stack([weighted[k] @ bases[(MODE_BLOCK * block + k) % 2]
-                                                for k in range(MODE_BLOCK)])
+                self._entering[key] = self._entering_rule(float(mu_i), MODE_BLOCK * block, MODE_BLOCK)
             out[:, :, i] = self._entering[key]
         return out
+
+    def _entering_rule(self, mu_i, first, count):
+        """``A_in[:, i]`` of one air direction, modes ``first .. first + count - 1``: (count, q)."""
+        theta_i = float(np.arccos(min(mu_i, 1.0)))
+        theta_t = float(np.arcsin(np.sin(theta_i) / self.n))
+        tg = self.theta_graze
+        # kinks: the refracted ray grazing its facet at psi = 0 or pi, and the facets that
+        # refract into theta turning horizontal (n mu = mu_i: D(m) -> 0 there, not smoothly)
+        theta_flat = float(np.arccos(mu_i / self.n))
+        theta, w = _graded_rule([theta_t, self.theta_c],
+                                [self.theta_c, theta_i - tg, tg - theta_i, theta_i + tg, theta_flat],
+                                self.finest, self.panel_points)
+        mu = np.cos(theta)
+        kernel = transmission_modes(mu, [mu_i], count, n_i=1.0, n_t=self.n, first_mode=first,
+                                    **self.options)[:, :, 0]
+        weighted = kernel * (w * np.sin(theta) * mu)
+        bases = self.basis.both(mu)
+        return np.stack([weighted[k] @ bases[(first + k) % 2] for k in range(count)])
 
     def leaving(self, mu_air, block):
         """``A_out[o, j]`` for air viewing cosines ``mu_air`` (k,): (MODE_BLOCK, k, q) [-]."""

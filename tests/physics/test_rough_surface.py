@@ -195,9 +195,9 @@ def test_rough_surface_argument_errors():
     layer = LAYERS[0]
     with pytest.raises(ValueError, match=r"^part must be one of \('total', 'body', 'surface'\), got 'lobe'$"):
         bayespig.brdf(45.0, 30.0, 180.0, part="lobe", **layer)
-    for bad in (-0.1, np.nan, np.inf):
+    for bad in (-0.1, np.nan, np.inf, 1.5):
         with pytest.raises(ValueError, match=r"^roughness \(microfacet alpha of the top surface\) must be a "
-                                             r"finite real number >= 0, got "):
+                                             r"finite real number in \[0, 1\], got "):
             bayespig.brdf(45.0, 30.0, 180.0, roughness=bad, **layer)
         with pytest.raises(ValueError, match=r"^roughness "):
             bayespig.hemispherical_reflectance(8.0, roughness=bad, **layer)
