@@ -85,8 +85,11 @@ FINEST_ALPHA_CAP = 0.25
 #: Gauss points per panel of the fine rules.
 PANEL_POINTS = 8
 #: Azimuthal modes of the surface kernels computed together (the forward model stops at the
-#: layer's last significant mode).
-MODE_BLOCK = 8
+#: layer's last significant mode; evaluating the kernels costs more than their Fourier sums).
+MODE_BLOCK = 16
+#: Finest panel [rad] next to a break of the fine rules (a kink of a kernel, not a peak): the
+#: smoothstep map makes a square-root kink smooth, so the panels there need not follow alpha.
+BREAK_FINEST_PANEL = 1.0 / 64.0
 #: Widest panel [rad] of the rule over air directions of the escape weights.
 AIR_WIDEST_PANEL = np.pi / 16.0
 #: Largest roughness accepted by the forward model: over [1e-4, 1] the quadrature is verified
@@ -100,14 +103,14 @@ _HALF_PI = 0.5 * np.pi
 
 def _graded_rule(peaks, breaks, finest, points=PANEL_POINTS, widest=_HALF_PI):
     """Nodes and weights in ``theta`` over (0, pi/2) for ``int h(theta) dtheta``: panels split at
-    ``breaks`` and halving in width towards each of ``peaks`` (and the breaks) down to
-    ``finest``, none wider than ``widest``; each panel Gauss-Legendre in the smoothstep variable
-    (square-root ends smooth)."""
+    ``breaks`` and halving in width towards each of ``peaks`` down to ``finest`` and towards
+    each break down to ``max(finest, BREAK_FINEST_PANEL)``, none wider than ``widest``; each
+    panel Gauss-Legendre in the smoothstep variable (square-root ends smooth)."""
     edges = [0.0, _HALF_PI]
-    inside = [x for x in list(peaks) + list(breaks) if 0.0 <= x <= _HALF_PI]
-    edges.extend(inside)
-    for centre in inside:
-        width = finest
+    centres = [(x, finest) for x in peaks] + [(x, max(finest, BREAK_FINEST_PANEL)) for x in breaks]
+    centres = [(x, w) for x, w in centres if 0.0 <= x <= _HALF_PI]
+    edges.extend(x for x, _ in centres)
+    for centre, width in centres:
         while width < _HALF_PI:
             edges.extend((centre - width, centre + width))
             width *= 2.0
@@ -189,7 +192,7 @@ class RoughInterface:
         # rays refracted through a facet graze it where i.o = -1/n (microfacet.transmission_modes)
         self.theta_graze = float(np.arccos(1.0 / self.n))
         self.finest = finest_panel * min(self.alpha, FINEST_ALPHA_CAP)
-        theta, w = _graded_rule([self.theta_c], [self.theta_c], self.finest, self.panel_points)
+        theta, w = _graded_rule([self.theta_c], [], self.finest, self.panel_points)
         self.outer_mu = np.cos(theta)
         self.outer_weight = w * np.sin(theta) * self.outer_mu  # for int h(mu) mu dmu
         self.outer_basis = self.basis.both(self.outer_mu)
@@ -217,7 +220,7 @@ class RoughInterface:
             for f, mu_f in enumerate(self.outer_mu):
                 theta = float(np.arccos(mu_f))
                 # kinks: facets at the critical angle at psi = 0 (theta + theta' = 2 theta_c) and pi
-                theta_in, w_in = _graded_rule([theta, tc], [tc, tg - theta, theta - tg, theta + tg], self.finest,
+                theta_in, w_in = _graded_rule([theta, tc], [tg - theta, theta - tg, theta + tg], self.finest,
                                               self.panel_points)
                 mu_in = np.cos(theta_in)
                 kernel = reflection_modes(mu_in, [mu_f], MODE_BLOCK, n_i=self.n, n_t=1.0, first_mode=first,
@@ -250,7 +253,7 @@ class RoughInterface:
         # refract into theta turning horizontal (n mu = mu_i: D(m) -> 0 there, not smoothly)
         theta_flat = float(np.arccos(mu_i / self.n))
         theta, w = _graded_rule([theta_t, self.theta_c],
-                                [self.theta_c, theta_i - tg, tg - theta_i, theta_i + tg, theta_flat],
+                                [theta_i - tg, tg - theta_i, theta_i + tg, theta_flat],
                                 self.finest, self.panel_points)
         mu = np.cos(theta)
         kernel = transmission_modes(mu, [mu_i], count, n_i=1.0, n_t=self.n, first_mode=first,
