@@ -12,6 +12,13 @@ eq. (3). Adding–doubling (:mod:`bayespig.physics.adding_doubling`) with
 :func:`surface_mode` is the cross-check (``solver="doubling"``) and the path for
 nearly conservative finite layers.
 
+A rough top surface (``roughness > 0``: Walter et al. 2007 microfacets, DESIGN.md "Rough top
+surface") takes :func:`~bayespig.physics.rough_surface.rough_surface_terms` instead: the same
+modes and quadrature, the surface's kernels integrated against the quadrature's interpolation
+basis (product integration), the same substrate law; the BRDF then includes the surface's own
+lobe (``part="total"``; :func:`first_surface_brdf`). ``roughness = 0`` runs the smooth code
+unchanged.
+
 Angles are in degrees, in air: ``theta_i`` incidence, ``theta_o`` viewing and
 ``delta_phi`` the azimuth between the plane of incidence and the plane of viewing,
 ``delta_phi = 180`` on the specular side, ``0`` back towards the source.
