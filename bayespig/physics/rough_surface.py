@@ -22,9 +22,10 @@ kernel appears between smooth functions of the binder direction: the layer's ``R
 and the radiance ``U(mu)``. Those are represented by their polynomial interpolants on the
 Gauss nodes of each quadrature interval (in ``mu`` below the critical cosine, in ``s`` with
 ``mu = mu_c + (1 - mu_c) s^2`` above it, the variables of the binder quadrature), with Lagrange
-basis ``l_j`` (times ``sin(theta) / sin(theta_j)`` in the odd azimuthal modes, whose
-``R_m`` and ``U_m`` carry a factor ``sin^m(theta)``, not smooth in ``mu`` at the normal), and the kernels are integrated against that basis on fine rules graded towards
-their peaks (product integration; Atkinson, *The Numerical Solution of Integral Equations of
+basis ``l_j`` (times ``sin(theta) / sin(theta_j)`` in the odd azimuthal modes, whose ``R_m``
+and ``U_m`` carry a factor ``sin^m(theta)``, not smooth in ``mu`` at the normal: without it
+``alpha = 1e-4`` missed the smooth model by 1.7e-4 at g = 0.5), and the kernels are integrated
+against that basis on fine rules graded towards their peaks (product integration; Atkinson, *The Numerical Solution of Integral Equations of
 the Second Kind*, 1997, section 4.2):
 
 - ``C t_in -> A_in[j, i] = int t_in(mu, mu_i) l_j(mu) mu dmu``,
@@ -43,10 +44,16 @@ accuracy no longer depends on ``alpha`` but on how well the interpolants represe
 ``U`` (measured in ``benchmarks/rough_surface.py``). The fine rules are composite
 Gauss-Legendre panels in the polar angle ``theta`` (the peaks are smooth in ``theta``, not in
 ``mu`` near the normal), halving in width towards each peak down to :data:`FINEST_PANEL` ``*
-alpha``, and split where an integrand is not smooth: the critical angle (where the basis
-changes interval and the facets start to reflect totally), where a refracted or reflected
-ray grazes its facet at ``psi = 0`` or ``pi``, and (transmission) where the facets refracting
-into a direction turn horizontal.
+min(alpha,`` :data:`FINEST_ALPHA_CAP` ``)``, and split where an integrand is not smooth (graded
+there down to :data:`BREAK_FINEST_PANEL`): the critical angle (where the basis changes interval
+and the facets start to reflect totally; graded as a peak), where a refracted or reflected ray
+grazes its facet at ``psi = 0`` or ``pi``, and (transmission) where the facets refracting into
+a direction turn horizontal.
+
+Measured (``benchmarks/rough_surface.py``, n = 1.45, layers with g up to 0.5, finite and
+opaque, substrates, in and out of the plane of incidence): ``alpha = 1e-4`` equals the smooth
+model to 3e-6; for alpha in [0.02, 1] the BRDF at 16 points per interval is within 2e-6
+(relative) of 48 points, and refining the fine rules changes it by < 4e-6.
 
 The weights depend on ``alpha``, ``n``, the quadrature and (for ``A_in``, ``A_out``) the air
 directions only, not on the layer: :func:`rough_interface` caches them.
