@@ -394,10 +394,12 @@ def surface_terms(theta_in, theta_out, *, a, tau, g=0.0, n=1.45, n_points=None,
         if included_substrate is not None:
             raise ValueError("included_substrate is a check of the smooth surface's substrate law; "
                              "a rough surface takes the substrate by eq. (3) only")
-        return SurfaceTerms(**rough_surface_terms(
-            theta_in, theta_out, a=a, tau=tau, g=float(g), n=n, n_points=n_points, alpha=roughness,
-            n_modes=n_modes, mode_tolerance=MODE_TOLERANCE, distribution=distribution,
-            start_thickness=start_thickness))
+        # small matrices: a single-threaded BLAS, as below (threads cost more than they give)
+        with _blas_controller().limit(limits=1, user_api="blas"):
+            return SurfaceTerms(**rough_surface_terms(
+                theta_in, theta_out, a=a, tau=tau, g=float(g), n=n, n_points=n_points, alpha=roughness,
+                n_modes=n_modes, mode_tolerance=MODE_TOLERANCE, distribution=distribution,
+                start_thickness=start_thickness))
     if included_substrate is not None:
         solver = "doubling"
     a = np.atleast_1d(np.asarray(a, dtype=float))
