@@ -94,9 +94,8 @@ BRDF_PARTS = ("total", "body", "surface")
 #: (tests/physics/test_rough_surface.py), and the fine rules would only grow.
 SMOOTH_BELOW = 1e-4
 #: Half-angle of the specular port (gloss trap) of an 8 deg/d sphere [deg], the cone around the
-#: mirror direction whose first-surface reflection SCE excludes. Instruments differ (the
-#: CIE 15 d:8 geometries leave it to the maker; a trap of ~5 deg half-angle is typical):
-#: pass an instrument's own value as ``specular_cone``.
+#: mirror direction whose first-surface reflection SCE excludes. An assumed default: ports
+#: differ between instruments, so pass an instrument's own value as ``specular_cone``.
 SPECULAR_CONE_HALF_ANGLE = 5.0
 #: Gauss-Legendre points per panel (in the angle from the mirror direction) and azimuth nodes
 #: around it of :func:`specular_port_reflectance`.

@@ -1,9 +1,9 @@
 """A rough dielectric interface: the microfacet BSDF of Walter et al. (2007) and its azimuthal modes.
 
-Groundwork for a rough air/binder surface (issue 16; DESIGN.md, "Rough top surface"). Nothing
-here is wired into the forward model yet: this module gives the surface's scattering functions,
-point by point and as the azimuthal Fourier kernels a discrete-ordinate solver would use at its
-top boundary instead of the smooth surface's diagonal Fresnel reflectance ``r_F``.
+The rough air/binder surface (issue 16; DESIGN.md, "Rough top surface"): the surface's
+scattering functions, point by point and as the azimuthal Fourier kernels that
+:mod:`bayespig.physics.rough_surface` integrates against the binder quadrature's basis at the top
+boundary of the layer, instead of the smooth surface's diagonal Fresnel reflectance ``r_F``.
 
 Model
 -----
