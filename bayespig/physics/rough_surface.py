@@ -217,12 +217,12 @@ class RoughInterface:
     def options(self):
         return {"alpha": self.alpha, "distribution": self.distribution, "points_per_panel": self.azimuth_points}
 
-    def internal(self, block):
-        """``W[j, k]`` of the modes ``MODE_BLOCK * block ..`` (MODE_BLOCK, q, q) [-]."""
-        if block not in self._internal:
-            first = MODE_BLOCK * block
+    def internal(self, block, size=MODE_BLOCK):
+        """``W[j, k]`` of the modes ``size * block .. size * (block + 1) - 1``: (size, q, q) [-]."""
+        if (block, size) not in self._internal:
+            first = size * block
             q = self.mu.size
-            rows = np.empty((MODE_BLOCK, self.outer_mu.size, q))
+            rows = np.empty((size, self.outer_mu.size, q))
             tc, tg = self.theta_c, 2.0 * self.theta_c
             for f, mu_f in enumerate(self.outer_mu):
                 theta = float(np.arccos(mu_f))
@@ -230,24 +230,25 @@ class RoughInterface:
                 theta_in, w_in = _graded_rule([theta, tc], [tg - theta, theta - tg, theta + tg], self.finest,
                                               self.panel_points)
                 mu_in = np.cos(theta_in)
-                kernel = reflection_modes(mu_in, [mu_f], MODE_BLOCK, n_i=self.n, n_t=1.0, first_mode=first,
+                kernel = reflection_modes(mu_in, [mu_f], size, n_i=self.n, n_t=1.0, first_mode=first,
                                           **self.options)[:, :, 0]
                 weighted = kernel * (w_in * np.sin(theta_in) * mu_in)
                 bases = self.basis.both(mu_in)
-                for k in range(MODE_BLOCK):
+                for k in range(size):
                     rows[k, f] = weighted[k] @ bases[(first + k) % 2]
             W = np.stack([np.einsum("f,fj,fk->jk", self.outer_weight, self.outer_basis[(first + k) % 2], rows[k])
-                          for k in range(MODE_BLOCK)])
-            self._internal[block] = 0.5 * (W + np.swapaxes(W, 1, 2))  # reciprocal; symmetric to round-off
-        return self._internal[block]
+                          for k in range(size)])
+            self._internal[block, size] = 0.5 * (W + np.swapaxes(W, 1, 2))  # reciprocal; symmetric to round-off
+        return self._internal[block, size]
 
-    def entering(self, mu_air, block):
-        """``A_in[j, i]`` for air cosines ``mu_air`` (k,), modes of ``block``: (MODE_BLOCK, q, k) [-]."""
-        out = np.empty((MODE_BLOCK, self.mu.size, len(mu_air)))
+    def entering(self, mu_air, block, size=MODE_BLOCK):
+        """``A_in[j, i]`` for air cosines ``mu_air`` (k,), modes of ``block`` (of ``size``):
+        (size, q, k) [-]."""
+        out = np.empty((size, self.mu.size, len(mu_air)))
         for i, mu_i in enumerate(mu_air):
-            key = (float(mu_i), block)
+            key = (float(mu_i), block, size)
             if key not in self._entering:
-                self._entering[key] = self._entering_rule(float(mu_i), MODE_BLOCK * block, MODE_BLOCK)
+                self._entering[key] = self._entering_rule(float(mu_i), size * block, size)
             out[:, :, i] = self._entering[key]
         return out
 
@@ -269,9 +270,9 @@ class RoughInterface:
         bases = self.basis.both(mu)
         return np.stack([weighted[k] @ bases[(first + k) % 2] for k in range(count)])
 
-    def leaving(self, mu_air, block):
-        """``A_out[o, j]`` for air viewing cosines ``mu_air`` (k,): (MODE_BLOCK, k, q) [-]."""
-        return np.swapaxes(self.entering(mu_air, block), 1, 2) / (self.n * self.n)
+    def leaving(self, mu_air, block, size=MODE_BLOCK):
+        """``A_out[o, j]`` for air viewing cosines ``mu_air`` (k,): (size, k, q) [-]."""
+        return np.swapaxes(self.entering(mu_air, block, size), 1, 2) / (self.n * self.n)
 
 
 @functools.lru_cache(maxsize=CACHE_SIZE)
@@ -359,6 +360,7 @@ def rough_surface_terms(theta_in, theta_out, *, a, tau, g, n, n_points, alpha, n
     tau = np.atleast_1d(np.asarray(tau, dtype=float))
     adaptive = n_modes is None
     max_modes = n_fourier_modes(g) if n_modes is None else int(n_modes)
+    size = min(MODE_BLOCK, max_modes)  # one mode only for isotropic scattering and hemispherical values
     mu, weight = interface.mu, interface.weight
     p_refl = phase_fourier_modes(mu, mu, g, max_modes, reflection=True)
     p_trans = phase_fourier_modes(mu, mu, g, max_modes, reflection=False)
@@ -372,10 +374,10 @@ def rough_surface_terms(theta_in, theta_out, *, a, tau, g, n, n_points, alpha, n
     quiet = np.zeros((B, k_out, k_in), dtype=int)
     scale = None
     for m in range(max_modes):
-        block, within = divmod(m, MODE_BLOCK)
-        A_in = interface.entering(mu_in, block)[within]
-        A_out = interface.leaving(mu_out, block)[within]
-        W = interface.internal(block)[within]
+        block, within = divmod(m, size)
+        A_in = interface.entering(mu_in, block, size)[within]
+        A_out = interface.leaving(mu_out, block, size)[within]
+        W = interface.internal(block, size)[within]
         thickness = start_thickness if m == 0 else max(start_thickness, START_THICKNESS_HIGHER_MODES)
         f = np.zeros((B, k_out, k_in))
         active = np.ones(B, dtype=bool) if m == 0 else (n_used > m).any(axis=(1, 2))
