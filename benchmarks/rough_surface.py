@@ -27,9 +27,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bayespig.physics import forward as fw  # noqa: E402
-from bayespig.physics import rough_surface as rs  # noqa: E402
-from benchmarks._common import machine_line  # noqa: E402
+from bayespig.physics import forward as fw
+from bayespig.physics import rough_surface as rs
+from benchmarks._common import machine_line
 
 N = 1.45
 #: (a, tau, g, r_s) of the layers compared
@@ -108,7 +108,7 @@ def main(quick=False):
 
     print("\n3. cost (one brdf() call, 4 x 5 x 4 geometries, one layer; the interface weights cached "
           "per alpha)")
-    kwargs = dict(a=0.1, tau=1.0, g=0.5)
+    kwargs = {"a": 0.1, "tau": 1.0, "g": 0.5}
     grid = np.meshgrid(THETA_IN, THETA_OUT, DELTA_PHI, indexing="ij")
     for alpha in [0.0] + alphas:
         rs.rough_interface.cache_clear()

@@ -786,6 +786,7 @@ def first_surface_brdf(theta_i, theta_o, delta_phi, *, roughness, n=1.45, distri
     numpy.ndarray
         The arguments broadcast [1/sr].
     """
+    roughness, n, distribution = surface_roughness(roughness), binder_index(n), _distribution(distribution)
     theta_i, theta_o, delta_phi = np.broadcast_arrays(*(np.asarray(x, dtype=float)
                                                         for x in (theta_i, theta_o, delta_phi)))
     if roughness == 0.0 or n == 1.0:
@@ -911,6 +912,7 @@ def specular_port_reflectance(theta_i, *, roughness, n=1.45, half_angle=SPECULAR
     numpy.ndarray
         The shape of ``theta_i`` [-].
     """
+    roughness, n, distribution = surface_roughness(roughness), binder_index(n), _distribution(distribution)
     theta_i = np.asarray(theta_i, dtype=float)
     mu_i = np.cos(np.radians(theta_i))
     if roughness == 0.0 or n == 1.0:

@@ -37,11 +37,11 @@ CONVERGENCE_TOLERANCE = 1e-5
 PORT_TOLERANCE = 1e-7
 
 LAYERS = [
-    dict(a=0.1, tau=1.0, g=0.0, r_s=0.0),
-    dict(a=0.02, tau=np.inf, g=0.5, r_s=0.0),
-    dict(a=0.5, tau=0.3, g=0.3, r_s=0.8),
-    dict(a=0.0, tau=np.inf, g=0.0, r_s=0.0),
-    dict(a=0.2, tau=2.0, g=-0.3, r_s=1.0),
+    {"a": 0.1, "tau": 1.0, "g": 0.0, "r_s": 0.0},
+    {"a": 0.02, "tau": np.inf, "g": 0.5, "r_s": 0.0},
+    {"a": 0.5, "tau": 0.3, "g": 0.3, "r_s": 0.8},
+    {"a": 0.0, "tau": np.inf, "g": 0.0, "r_s": 0.0},
+    {"a": 0.2, "tau": 2.0, "g": -0.3, "r_s": 1.0},
 ]
 THETA_I = np.array([0.0, 20.0, 45.0, 70.0])[:, None, None]
 THETA_O = np.array([0.0, 10.0, 30.0, 50.0, 75.0])[None, :, None]
@@ -181,7 +181,7 @@ def test_reciprocity(alpha, layer):
 
 
 def test_hemispherical_is_the_integral_of_the_brdf():
-    alpha, layer = 0.3, dict(a=0.1, tau=2.0, g=0.4, r_s=0.5)
+    alpha, layer = 0.3, {"a": 0.1, "tau": 2.0, "g": 0.4, "r_s": 0.5}
     x, w = np.polynomial.legendre.leggauss(48)
     mu, w_mu = 0.5 * (x + 1.0), 0.5 * w
     phi, w_phi = 90.0 * (x + 1.0), 0.5 * np.pi * w  # over [0, 180] deg, doubled below
@@ -211,7 +211,7 @@ def test_specular_port_takes_the_lobe_in_its_cone():
 
 @pytest.mark.parametrize("alpha", [0.02, 0.1, 0.6])
 def test_converged_in_the_quadrature(alpha):
-    layer = dict(a=0.05, tau=np.inf, g=0.6, r_s=0.0)
+    layer = {"a": 0.05, "tau": np.inf, "g": 0.6, "r_s": 0.0}
     f16, f32 = (bayespig.brdf(THETA_I, THETA_O, DELTA_PHI, roughness=alpha, n_points=p, **layer) for p in (16, 32))
     assert _relative(f16, f32) < CONVERGENCE_TOLERANCE
 
@@ -238,7 +238,7 @@ def test_rough_surface_argument_errors():
 
 
 def test_index_matched_surface_does_not_scatter():
-    layer = dict(a=0.1, tau=1.0, g=0.0, r_s=0.3, n=1.0)
+    layer = {"a": 0.1, "tau": 1.0, "g": 0.0, "r_s": 0.3, "n": 1.0}
     assert np.array_equal(bayespig.brdf(THETA_I, THETA_O, DELTA_PHI, roughness=0.3, **layer),
                           bayespig.brdf(THETA_I, THETA_O, DELTA_PHI, **layer))
     assert not bayespig.brdf(THETA_I, THETA_O, DELTA_PHI, roughness=0.3, part="surface", **layer).any()
