@@ -301,6 +301,9 @@ class MonteCarloResult:
         The first-surface lobe (Walter, analytic) [1/sr], shape (V,).
     body, body_standard_error : numpy.ndarray
         The body part and its standard error [1/sr], shape (V,).
+    body_covariance : numpy.ndarray
+        Covariance of the body estimates [1/sr^2], shape (V, V) (the views share photons), so
+        that a weighted sum ``w @ body`` has standard error ``sqrt(w @ body_covariance @ w)``.
     energy : dict
         Fractions of the incident power (each with ``<key>_standard_error``):
         ``surface_reflected`` (first-surface reflection into air), ``body_escaped`` (left the
@@ -315,6 +318,7 @@ class MonteCarloResult:
     surface: np.ndarray
     body: np.ndarray
     body_standard_error: np.ndarray
+    body_covariance: np.ndarray
     energy: dict = field(default_factory=dict)
     n_events: int = 0
 
@@ -388,64 +392,105 @@ def monte_carlo_brdf(theta_i, views, *, a, tau, g=0.0, r_s=0.0, n=1.45, alpha,
     surface = walter_reflection(incident[None, :], outgoing, n, alpha)
     if part == "surface":
         zero = np.zeros(len(views))
-        return MonteCarloResult(surface.copy(), zero, surface, zero, zero)
+        return MonteCarloResult(surface.copy(), zero, surface, zero, zero, np.zeros((len(views),) * 2))
 
+    body, covariance, energy, n_events = _run(incident, outgoing, a, tau, g, r_s, n, alpha,
+                                              n_photons, seed, batch_size)
+    body_error = np.sqrt(np.diag(covariance))
+    value = body + surface if part == "total" else body
+    return MonteCarloResult(value, body_error, surface, body, body_error, covariance, energy, n_events)
+
+
+def monte_carlo_albedo(theta_i, *, a, tau, g=0.0, r_s=0.0, n=1.45, alpha, n_photons=100_000,
+                       seed=0, batch_size=DEFAULT_BATCH):
+    """Body's directional–hemispherical reflectance by next-event estimation, and the energy account.
+
+    Every event scores toward one cosine-distributed air direction of its own (``pi`` times
+    the BRDF estimate there), so the estimate integrates the same next-event scores as
+    :func:`monte_carlo_brdf` over the hemisphere without a quadrature.  Parameters as
+    :func:`monte_carlo_brdf`.
+
+    Returns
+    -------
+    albedo, standard_error : float
+        The body's directional–hemispherical reflectance [-] (fraction of the incident power
+        leaving the layer into air, next-event estimate) and its standard error.
+    energy : dict
+        The analog energy account (see :class:`MonteCarloResult`).
+    """
+    theta_i, a, tau, g, r_s, n, alpha = (float(x) for x in (theta_i, a, tau, g, r_s, n, alpha))
+    _check(theta_i, np.zeros((1, 2)), a, tau, g, r_s, n, alpha, n_photons, "body")
+    body, covariance, energy, _ = _run(air_direction(theta_i), None, a, tau, g, r_s, n, alpha,
+                                       n_photons, seed, batch_size)
+    return float(body[0]), float(np.sqrt(covariance[0, 0])), energy
+
+
+ENERGY_KEYS = ("surface_reflected", "body_escaped", "microfacet_loss", "absorbed")
+
+
+def _run(incident, outgoing, a, tau, g, r_s, n, alpha, n_photons, seed, batch_size):
+    """Trace ``n_photons`` in batches; mean scores, their covariance, energy account, events."""
     rng = np.random.default_rng(seed)
-    score_sum = np.zeros(len(views))
-    score_sq = np.zeros(len(views))
-    energy_keys = ("surface_reflected", "body_escaped", "microfacet_loss", "absorbed")
-    energy_sum = dict.fromkeys(energy_keys, 0.0)
-    energy_sq = dict.fromkeys(energy_keys, 0.0)
+    v = 1 if outgoing is None else outgoing.shape[0]
+    score_sum = np.zeros(v)
+    score_products = np.zeros((v, v))
+    energy_sum = dict.fromkeys(ENERGY_KEYS, 0.0)
+    energy_sq = dict.fromkeys(ENERGY_KEYS, 0.0)
     n_events = 0
     done = 0
     while done < n_photons:
         size = min(batch_size, n_photons - done)
         scores, energy, events = _trace_batch(size, incident, outgoing, a, tau, g, r_s, n, alpha, rng)
         score_sum += scores.sum(axis=0)
-        score_sq += (scores**2).sum(axis=0)
-        for key in energy_keys:
+        score_products += scores.T @ scores
+        for key in ENERGY_KEYS:
             energy_sum[key] += energy[key].sum()
             energy_sq[key] += (energy[key] ** 2).sum()
         n_events += events
         done += size
-
-    def mean_and_error(total, total_sq):
-        mean = total / n_photons
-        variance = np.maximum(total_sq / n_photons - mean**2, 0.0) * n_photons / (n_photons - 1)
-        return mean, np.sqrt(variance / n_photons)
-
-    body, body_error = mean_and_error(score_sum, score_sq)
+    mean = score_sum / n_photons
+    covariance = (score_products / n_photons - np.outer(mean, mean)) / (n_photons - 1)
     energy_out = {}
-    for key in energy_keys:
-        energy_out[key], energy_out[key + "_standard_error"] = mean_and_error(energy_sum[key], energy_sq[key])
-    value = body + surface if part == "total" else body
-    return MonteCarloResult(value, body_error, surface, body, body_error, energy_out, n_events)
+    for key in ENERGY_KEYS:
+        m = energy_sum[key] / n_photons
+        energy_out[key] = m
+        energy_out[key + "_standard_error"] = np.sqrt(max(energy_sq[key] / n_photons - m * m, 0.0) / (n_photons - 1))
+    return mean, covariance, energy_out, n_events
 
 
 def _next_event(outgoing, depth, emission, n, alpha, rng):
     """Score of events at ``depth`` (P,) toward the air views ``outgoing`` (V, 3).
 
     ``emission(up)`` gives each event's emitted weight per steradian (P, V) for upward
-    propagation directions ``up`` (P, V, 3).  Returns (P, V).
+    propagation directions ``up`` (P, V, 3).  Returns (P, V).  With ``outgoing=None`` every
+    event draws its own cosine-distributed view and scores ``pi`` times its BRDF estimate, an
+    estimate of the body's directional-hemispherical reflectance (P, 1).
     """
-    p, v = depth.shape[0], outgoing.shape[0]
-    o = np.broadcast_to(outgoing, (p, v, 3))
+    p = depth.shape[0]
+    if outgoing is None:
+        o, factor = _sample_cosine_up(p, rng)[:, None, :], np.pi
+    else:
+        o, factor = np.broadcast_to(outgoing, (p,) + outgoing.shape), 1.0
+    v = o.shape[1]
     m = sample_visible_normal(o, alpha, rng.random((p, v)), rng.random((p, v)))
     f = fresnel_unpolarised(_dot(o, m), n)
     i, ok = refract(o, m, 1.0 / n)
     mu_i = -i[..., 2]
     ok &= mu_i > 0.0
     mu_safe = np.where(ok, mu_i, 1.0)
-    weight = (1.0 - f) * smith_g1(mu_safe, alpha) / (n * n * mu_safe)
+    weight = factor * (1.0 - f) * smith_g1(mu_safe, alpha) / (n * n * mu_safe)
     return np.where(ok, emission(-i) * weight * np.exp(-depth[:, None] / mu_safe), 0.0)
 
 
 def _trace_batch(size, incident, outgoing, a, tau, g, r_s, n, alpha, rng):
-    """Trace ``size`` photons; per-photon scores (size, V), energy account, events traced."""
-    v = outgoing.shape[0]
+    """Trace ``size`` photons; per-photon scores (size, V), energy account, events traced.
+
+    ``outgoing`` (V, 3) are the air views, or None for the hemispherical estimate (V = 1).
+    """
+    v = 1 if outgoing is None else outgoing.shape[0]
     omega = 1.0 - a
     scores = np.zeros((size, v))
-    energy = {key: np.zeros(size) for key in ("surface_reflected", "body_escaped", "microfacet_loss", "absorbed")}
+    energy = {key: np.zeros(size) for key in ENERGY_KEYS}
 
     # entry from air: the reflected share is the (analytic) surface part; the body gets the rest
     i_air = np.broadcast_to(incident, (size, 3))
