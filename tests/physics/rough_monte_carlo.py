@@ -72,6 +72,7 @@ E. Heitz, "Sampling the GGX distribution of visible normals", JCGT 7(4), 2018.
 """
 
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -482,6 +483,16 @@ def _next_event(outgoing, depth, emission, n, alpha, rng):
     return np.where(ok, emission(-i) * weight * np.exp(-depth[:, None] / mu_safe), 0.0)
 
 
+def _scattered(weight, direction, g, up):
+    """Weight per steradian scattered from ``direction`` (P, 3) into ``up`` (P, V, 3)."""
+    return weight[:, None] * henyey_greenstein(_dot(direction[:, None, :], up), g)
+
+
+def _lambertian(weight, up):
+    """Weight per steradian a Lambertian surface emits into ``up`` (P, V, 3)."""
+    return weight[:, None] * up[..., 2] / np.pi
+
+
 def _trace_batch(size, incident, outgoing, a, tau, g, r_s, n, alpha, rng):
     """Trace ``size`` photons; per-photon scores (size, V), energy account, events traced.
 
@@ -524,9 +535,7 @@ def _trace_batch(size, incident, outgoing, a, tau, g, r_s, n, alpha, rng):
             d = direction[k]
             w = weight[k]
             scores[index[k]] += _next_event(
-                outgoing, new_depth,
-                lambda up: (w * omega)[:, None] * henyey_greenstein(_dot(d[:, None, :], up), g),
-                n, alpha, rng)
+                outgoing, new_depth, partial(_scattered, w * omega, d, g), n, alpha, rng)
             energy["absorbed"][index[k]] += w * a
             weight[k] = w * omega
             depth[k] = new_depth
@@ -538,8 +547,7 @@ def _trace_batch(size, incident, outgoing, a, tau, g, r_s, n, alpha, rng):
         if k.size:
             w = weight[k]
             scores[index[k]] += _next_event(
-                outgoing, np.full(k.size, tau),
-                lambda up: (w * r_s)[:, None] * up[..., 2] / np.pi, n, alpha, rng)
+                outgoing, np.full(k.size, tau), partial(_lambertian, w * r_s), n, alpha, rng)
             energy["absorbed"][index[k]] += w * (1.0 - r_s)
             weight[k] = w * r_s
             depth[k] = tau
@@ -582,7 +590,7 @@ def _trace_batch(size, incident, outgoing, a, tau, g, r_s, n, alpha, rng):
 SOLVER_VIEWS = ((0.0, 0.0), (30.0, 0.0), (60.0, 0.0), (15.0, 180.0), (30.0, 180.0),
                 (60.0, 180.0), (45.0, 90.0), (30.0, 135.0))
 SOLVER_CASES = tuple(
-    dict(theta_i=theta_i, alpha=alpha, g=g, a=a, tau=tau, r_s=r_s, n=1.45, views=SOLVER_VIEWS)
+    {"theta_i": theta_i, "alpha": alpha, "g": g, "a": a, "tau": tau, "r_s": r_s, "n": 1.45, "views": SOLVER_VIEWS}
     for theta_i, alpha, g, a, tau, r_s in (
         (45.0, 0.05, 0.0, 0.3, 1.0, 0.8),
         (45.0, 0.2, 0.0, 0.01, np.inf, 0.0),

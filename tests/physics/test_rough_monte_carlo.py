@@ -165,8 +165,8 @@ def test_next_event_exit_weight_matches_walter_transmission(alpha, theta_o):
 
 
 SMOOTH_LAYERS = [
-    dict(a=0.3, tau=1.0, g=0.0, r_s=0.8),
-    dict(a=0.3, tau=np.inf, g=0.6, r_s=0.0),
+    {"a": 0.3, "tau": 1.0, "g": 0.0, "r_s": 0.8},
+    {"a": 0.3, "tau": np.inf, "g": 0.6, "r_s": 0.0},
 ]
 
 
@@ -186,8 +186,8 @@ def test_small_roughness_matches_smooth_solver(layer):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("layer", [dict(a=0.01, tau=np.inf, g=0.0, r_s=0.0),
-                                   dict(a=0.01, tau=1.0, g=0.6, r_s=0.8)])
+@pytest.mark.parametrize("layer", [{"a": 0.01, "tau": np.inf, "g": 0.0, "r_s": 0.0},
+                                   {"a": 0.01, "tau": 1.0, "g": 0.6, "r_s": 0.8}])
 def test_small_roughness_matches_smooth_solver_precisely(layer):
     """As above to ~0.15 % at low absorption (long walks)."""
     mc = rmc.monte_carlo_brdf(60.0, IN_AND_OUT_OF_PLANE, alpha=SMOOTH_ALPHA, n=N_BINDER,
@@ -247,7 +247,7 @@ def test_energy_conservation_precisely():
     assert _within(albedo + surface + loss, 1.0, albedo_error + loss_error), (albedo, surface, loss)
 
 
-RECIPROCITY_LAYER = dict(a=0.3, tau=1.0, g=0.6, r_s=0.8, alpha=0.3, n=N_BINDER)
+RECIPROCITY_LAYER = {"a": 0.3, "tau": 1.0, "g": 0.6, "r_s": 0.8, "alpha": 0.3, "n": N_BINDER}
 
 
 @pytest.mark.parametrize("theta_a, theta_b", [(30.0, 60.0), (10.0, 70.0)])
@@ -265,7 +265,7 @@ def test_reciprocity(theta_a, theta_b):
     np.testing.assert_allclose(forward.surface, backward.surface, rtol=1e-12)
 
 
-INDEX_MATCHED_LAYERS = [dict(a=0.3, tau=1.0, g=0.6, r_s=0.8), dict(a=0.3, tau=np.inf, g=0.0, r_s=0.0)]
+INDEX_MATCHED_LAYERS = [{"a": 0.3, "tau": 1.0, "g": 0.6, "r_s": 0.8}, {"a": 0.3, "tau": np.inf, "g": 0.0, "r_s": 0.0}]
 
 
 @pytest.mark.parametrize("layer", INDEX_MATCHED_LAYERS)
@@ -297,7 +297,7 @@ def test_index_matched_surface_only_masks(layer):
     ("theta_i", 95.0, "theta_i must be in [0, 90)"),
 ])
 def test_bad_arguments(argument, value, message):
-    arguments = dict(theta_i=30.0, views=[(10.0, 0.0)], a=0.1, tau=1.0, alpha=0.2, n_photons=100, part="body")
+    arguments = {"theta_i": 30.0, "views": [(10.0, 0.0)], "a": 0.1, "tau": 1.0, "alpha": 0.2, "n_photons": 100, "part": "body"}
     arguments[argument] = value
     with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)").replace("[", r"\[")):
         rmc.monte_carlo_brdf(**arguments)
