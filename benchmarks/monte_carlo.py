@@ -9,8 +9,8 @@ For each case of ``tests/physics/rough_monte_carlo.SOLVER_CASES`` (alpha 0.05–
 incidence), the wall time, the events traced per photon, the time per event and view, and
 the body BRDF's relative standard errors over the views (median and largest).  When
 ``bayespig.brdf`` takes ``roughness``, also the solver's relative difference from the Monte
-Carlo per view and its size in standard errors (``compare_with_solver``), parts "body" and
-"total".
+Carlo per view and its size in standard errors (``compare_with_solver``), parts "body",
+"total" and "surface" (Walter's formula, analytic in both).
 """
 
 import inspect
@@ -23,7 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from tests.physics import rough_monte_carlo as rmc  # noqa: E402
+from tests.physics import rough_monte_carlo as rmc
 
 
 def main(n_photons):
@@ -47,13 +47,15 @@ def main(n_photons):
     if "roughness" not in inspect.signature(bayespig.brdf).parameters:
         print("bayespig.brdf has no roughness keyword: no solver comparison")
         return
-    for part in ("body", "total"):
-        rows = rmc.compare_with_solver(bayespig.brdf, rmc.SOLVER_CASES, part=part, n_photons=n_photons)
+    all_rows = rmc.compare_with_solver(bayespig.brdf, rmc.SOLVER_CASES, parts=("body", "total", "surface"),
+                                       n_photons=n_photons)
+    for part in ("body", "total", "surface"):
+        rows = [row for row in all_rows if row["part"] == part]
         worst = max(rows, key=lambda row: abs(row["relative_difference"]))
         print(f"solver vs Monte Carlo, part {part!r}: largest |relative difference| "
-              f"{100 * abs(worst['relative_difference']):.2f} % ({worst['sigmas']:+.1f} standard errors) at "
+              f"{100 * abs(worst['relative_difference']):.3f} % ({worst['sigmas']:+.1f} standard errors) at "
               f"theta_i {worst['theta_i']:g}, view ({worst['theta_o']:g}, {worst['delta_phi']:g}), "
-              f"alpha {worst['alpha']:g}; largest |sigmas| {max(abs(row['sigmas']) for row in rows):.1f}")
+              f"alpha {worst['alpha']:g}", flush=True)
         for row in rows:
             print(f"  theta_i {row['theta_i']:4g} alpha {row['alpha']:4g} g {row['g']:3g} a {row['a']:4g} "
                   f"tau {row['tau']:3g} r_s {row['r_s']:3g} view ({row['theta_o']:2g}, {row['delta_phi']:3g}): "

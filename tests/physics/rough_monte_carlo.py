@@ -602,7 +602,8 @@ SOLVER_CASES = tuple(
 )
 
 
-def compare_with_solver(brdf_function, cases=SOLVER_CASES, *, part="body", n_photons=100_000, seed=0):
+def compare_with_solver(brdf_function, cases=SOLVER_CASES, *, parts=("body", "total"), n_photons=100_000,
+                        seed=0):
     """Compare a BRDF function against the Monte Carlo, case by case.
 
     Parameters
@@ -611,33 +612,43 @@ def compare_with_solver(brdf_function, cases=SOLVER_CASES, *, part="body", n_pho
         Called as ``brdf_function(theta_i, theta_o, delta_phi, a=, tau=, g=, r_s=, n=,
         roughness=alpha, part=part)`` with arrays of the views; returns BRDF [1/sr].
     cases : sequence of dict
-        Keys ``theta_i, alpha, g, a, tau, r_s, n, views`` (as :data:`SOLVER_CASES`).
-    part : {"total", "body", "surface"}
+        Keys ``theta_i, alpha, g, a, tau, r_s, n, views`` (as :data:`SOLVER_CASES`), and
+        optionally ``n_photons`` (overrides the argument for that case).
+    parts : sequence of {"total", "body", "surface"}
+        The parts compared (one Monte Carlo run per case serves them all; "surface" is
+        Walter's formula, standard error 0).
     n_photons, seed : int
-        Monte Carlo photons and seed per case.
+        Monte Carlo photons per case and the seed (case ``k`` uses ``(seed, k)``).
 
     Returns
     -------
     list of dict
-        One per case and view: the case's parameters, ``theta_o``, ``delta_phi``, ``solver``,
-        ``monte_carlo``, ``standard_error`` [1/sr], ``relative_difference`` (solver / MC - 1)
-        and ``sigmas`` (difference in standard errors).
+        One per case, part and view: the case's parameters, ``part``, ``theta_o``,
+        ``delta_phi``, ``solver``, ``monte_carlo``, ``standard_error`` [1/sr],
+        ``relative_difference`` (solver / MC - 1) and ``sigmas`` (difference in standard
+        errors).
     """
     rows = []
     for number, case in enumerate(cases):
         views = np.asarray(case["views"], dtype=float)
         mc = monte_carlo_brdf(case["theta_i"], views, a=case["a"], tau=case["tau"], g=case["g"],
                               r_s=case["r_s"], n=case["n"], alpha=case["alpha"],
-                              n_photons=n_photons, seed=(seed, number), part=part)
-        solver = np.asarray(brdf_function(case["theta_i"], views[:, 0], views[:, 1], a=case["a"],
-                                          tau=case["tau"], g=case["g"], r_s=case["r_s"], n=case["n"],
-                                          roughness=case["alpha"], part=part), dtype=float)
-        for k, (theta_o, delta_phi) in enumerate(views):
-            difference = solver[k] - mc.brdf[k]
-            error = mc.standard_error[k]
-            rows.append(dict({key: case[key] for key in ("theta_i", "alpha", "g", "a", "tau", "r_s", "n")},
-                             theta_o=theta_o, delta_phi=delta_phi, solver=solver[k],
-                             monte_carlo=mc.brdf[k], standard_error=error,
-                             relative_difference=difference / mc.brdf[k],
-                             sigmas=difference / error if error > 0 else np.inf * np.sign(difference)))
+                              n_photons=case.get("n_photons", n_photons), seed=(seed, number), part="body")
+        reference = {"body": (mc.body, mc.body_standard_error),
+                     "surface": (mc.surface, np.zeros_like(mc.surface)),
+                     "total": (mc.body + mc.surface, mc.body_standard_error)}
+        for part in parts:
+            solver = np.asarray(brdf_function(case["theta_i"], views[:, 0], views[:, 1], a=case["a"],
+                                              tau=case["tau"], g=case["g"], r_s=case["r_s"], n=case["n"],
+                                              roughness=case["alpha"], part=part), dtype=float)
+            value, error = reference[part]
+            for k, (theta_o, delta_phi) in enumerate(views):
+                difference = solver[k] - value[k]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    sigmas = difference / error[k] if error[k] > 0 else np.inf * np.sign(difference)
+                    relative = difference / value[k]
+                rows.append({**{key: case[key] for key in ("theta_i", "alpha", "g", "a", "tau", "r_s", "n")},
+                             "part": part, "theta_o": theta_o, "delta_phi": delta_phi,
+                             "solver": solver[k], "monte_carlo": value[k], "standard_error": error[k],
+                             "relative_difference": relative, "sigmas": sigmas})
     return rows
