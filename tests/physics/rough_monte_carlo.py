@@ -49,20 +49,31 @@ where ``S`` is the event's emission per steradian (``omega p_HG(d, -i)`` for sca
 ``r_s mu_i / pi`` at the substrate) — Walter's BTDF over the pdf of ``i`` (the facet's
 ``D G1(o) |o.m| / mu_o`` times the refraction Jacobian) reduces to ``(1 - F) G1(i) / (n^2
 mu_i)``, the ``1 / n^2`` being the radiance's change of solid angle.  Per-photon scores give
-the standard error.  Cost: about 1–3 microseconds per event and view on one core.
+the standard error.  Cost: about 0.3–0.6 microseconds per event and view on one core.
 
 Use against the deterministic solver
 ------------------------------------
 ::
 
-    from tests.physics.rough_monte_carlo import compare_with_solver, SOLVER_CASES
     import bayespig
-    rows = compare_with_solver(bayespig.brdf, SOLVER_CASES, n_photons=200_000)
-    for row in rows: print(row)
+    from tests.physics import rough_monte_carlo as rmc
+
+    # one geometry: the body BRDF and its standard errors at views (theta_o, delta_phi) [deg]
+    mc = rmc.monte_carlo_brdf(45.0, [(0, 0), (30, 180), (45, 90)], a=0.3, tau=1.0, g=0.6,
+                              r_s=0.8, n=1.45, alpha=0.2, n_photons=100_000, seed=1, part="body")
+    mc.brdf, mc.standard_error, mc.surface, mc.energy
+
+    # the issue's cases against a solver (one Monte Carlo run per case serves every part)
+    rows = rmc.compare_with_solver(bayespig.brdf, rmc.SOLVER_CASES, parts=("body", "total"),
+                                   n_photons=100_000)
+    worst = max(rows, key=lambda row: abs(row["sigmas"]))
 
 ``compare_with_solver`` calls ``brdf_function(theta_i, theta_o, delta_phi, a=..., tau=...,
-g=..., r_s=..., n=..., roughness=alpha, part=...)`` and returns the relative difference and
-its size in standard errors for every case and view.
+g=..., r_s=..., n=..., roughness=alpha, part=...)`` and returns, per case, part and view, the
+relative difference and its size in standard errors.  ``python benchmarks/monte_carlo.py``
+prints the cost and precision per case (and the comparison when the solver has roughness):
+at 1e5 photons 0.1-0.6 % standard error per view, 1-3 s per case of 8 views for a = 0.3 or
+tau = 1, 30-60 s for a = 0.01 semi-infinite (80-130 events per photon).
 
 References
 ----------
@@ -645,8 +656,9 @@ def compare_with_solver(brdf_function, cases=SOLVER_CASES, *, parts=("body", "to
             for k, (theta_o, delta_phi) in enumerate(views):
                 difference = solver[k] - value[k]
                 with np.errstate(divide="ignore", invalid="ignore"):
-                    sigmas = difference / error[k] if error[k] > 0 else np.inf * np.sign(difference)
-                    relative = difference / value[k]
+                    sigmas = (difference / error[k] if error[k] > 0
+                              else 0.0 if difference == 0 else np.copysign(np.inf, difference))
+                    relative = difference / value[k] if value[k] != 0 else (0.0 if difference == 0 else np.inf)
                 rows.append({**{key: case[key] for key in ("theta_i", "alpha", "g", "a", "tau", "r_s", "n")},
                              "part": part, "theta_o": theta_o, "delta_phi": delta_phi,
                              "solver": solver[k], "monte_carlo": value[k], "standard_error": error[k],
