@@ -186,15 +186,15 @@ def test_small_roughness_matches_smooth_solver(layer):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("layer", [{"a": 0.01, "tau": np.inf, "g": 0.0, "r_s": 0.0},
+@pytest.mark.parametrize("layer", [{"a": 0.01, "tau": np.inf, "g": 0.6, "r_s": 0.0},
                                    {"a": 0.01, "tau": 1.0, "g": 0.6, "r_s": 0.8}])
 def test_small_roughness_matches_smooth_solver_precisely(layer):
-    """As above to ~0.15 % at low absorption (long walks)."""
-    mc = rmc.monte_carlo_brdf(60.0, IN_AND_OUT_OF_PLANE, alpha=SMOOTH_ALPHA, n=N_BINDER,
-                              n_photons=400_000, seed=2, part="body", **layer)
+    """As above to ~0.2 % at low absorption (long walks: ~130 events per photon; ~3 min)."""
+    mc = rmc.monte_carlo_brdf(20.0, IN_AND_OUT_OF_PLANE, alpha=SMOOTH_ALPHA, n=N_BINDER,
+                              n_photons=300_000, seed=2, part="body", **layer)
     views = np.asarray(IN_AND_OUT_OF_PLANE)
-    smooth = bayespig.brdf(60.0, views[:, 0], views[:, 1], n=N_BINDER, **layer)
-    assert np.all(mc.standard_error < 0.25 * MAX_RELATIVE_ERROR * mc.brdf)
+    smooth = bayespig.brdf(20.0, views[:, 0], views[:, 1], n=N_BINDER, **layer)
+    assert np.all(mc.standard_error < 0.3 * MAX_RELATIVE_ERROR * mc.brdf)
     assert np.all(_within(mc.brdf, smooth, mc.standard_error)), (mc.brdf / smooth - 1, mc.standard_error / mc.brdf)
 
 
@@ -274,8 +274,9 @@ def test_index_matched_surface_only_masks(layer):
 
     Light crosses the surface straight through with weight G1 of its direction, once going
     in and once coming out, so the body is ``G1(theta_i) G1(theta_o)`` times the smooth
-    index-matched body (bayespig.brdf at n = 1) and the surface lobe is zero. (The masking
-    does not vanish at n = 1: alpha still matters through G1.)
+    index-matched body (bayespig.brdf at n = 1) and the surface lobe is zero.  (The masking
+    does not vanish at n = 1: alpha still matters through G1.  This is Walter's model's limit
+    n -> 1+; a solver that treats n = 1 as no surface at all differs from it by G1 G1.)
     """
     alpha, theta_i = 0.4, 40.0
     mc = rmc.monte_carlo_brdf(theta_i, IN_AND_OUT_OF_PLANE, n=1.0, alpha=alpha, n_photons=40_000,
