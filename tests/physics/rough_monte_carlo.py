@@ -68,6 +68,12 @@ Use against the deterministic solver
                                    n_photons=100_000)
     worst = max(rows, key=lambda row: abs(row["sigmas"]))
 
+    # directional-hemispherical reflectance of the body (next-event scores over the
+    # hemisphere) and the energy account: surface_reflected (first-surface albedo),
+    # body_escaped (analog), microfacet_loss, absorbed
+    albedo, albedo_error, energy = rmc.monte_carlo_albedo(45.0, a=0.0, tau=1.0, r_s=1.0,
+                                                          alpha=0.3, n_photons=100_000)
+
 ``compare_with_solver`` calls ``brdf_function(theta_i, theta_o, delta_phi, a=..., tau=...,
 g=..., r_s=..., n=..., roughness=alpha, part=...)`` and returns, per case, part and view, the
 relative difference and its size in standard errors.  ``python benchmarks/monte_carlo.py``
