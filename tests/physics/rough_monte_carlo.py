@@ -606,6 +606,9 @@ def _trace_batch(size, incident, outgoing, a, tau, g, r_s, n, alpha, rng):
 #: out-of-plane views).  ``views`` are (theta_o, delta_phi) pairs [deg].
 SOLVER_VIEWS = ((0.0, 0.0), (30.0, 0.0), (60.0, 0.0), (15.0, 180.0), (30.0, 180.0),
                 (60.0, 180.0), (45.0, 90.0), (30.0, 135.0))
+#: Grazing views (the slow comparison adds them; measured against the rough solver of 59d86c7:
+#: within 2.6 standard errors, <= 0.6 %).
+GRAZING_VIEWS = ((75.0, 0.0), (80.0, 180.0), (85.0, 90.0))
 SOLVER_CASES = tuple(
     {"theta_i": theta_i, "alpha": alpha, "g": g, "a": a, "tau": tau, "r_s": r_s, "n": 1.45, "views": SOLVER_VIEWS}
     for theta_i, alpha, g, a, tau, r_s in (
