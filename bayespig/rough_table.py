@@ -100,8 +100,8 @@ class RoughTableSettings:
     alpha_min, alpha_max : float
         Ends of the roughness axis (GGX ``alpha``) [-], ``0 < alpha_min < alpha_max``.
     per_octave : int
-        ``log alpha`` nodes per factor of two (the end ``alpha_max`` is a node; the axis is
-        extended below ``alpha_min`` to a whole number of steps).
+        Fewest ``log alpha`` nodes per factor of two (the nodes are uniform in ``log alpha``
+        from ``alpha_min`` to ``alpha_max``, both nodes).
     n_a : int
         Nodes on the absorption axis ``v(a)`` (that of :class:`bayespig.table.TableSettings`).
     a_stretch : float
@@ -134,21 +134,20 @@ class RoughTableSettings:
                              "[alpha_min, alpha_max] or raise per_octave")
 
     @property
-    def log_alpha_step(self):
-        """Spacing of the ``log alpha`` nodes [-]."""
-        return np.log(2.0) / self.per_octave
+    def n_alpha(self):
+        """Nodes on the roughness axis: at least ``per_octave`` per factor of two."""
+        return int(np.ceil(np.log2(self.alpha_max / self.alpha_min) * self.per_octave - 1e-9)) + 1
 
     @property
-    def n_alpha(self):
-        """Nodes on the roughness axis."""
-        return int(np.ceil(np.log(self.alpha_max / self.alpha_min) / self.log_alpha_step - 1e-9)) + 1
+    def log_alpha_step(self):
+        """Spacing of the ``log alpha`` nodes [-]."""
+        return np.log(self.alpha_max / self.alpha_min) / (self.n_alpha - 1)
 
     @property
     def alpha_nodes(self):
-        """Roughness nodes [-], geometric, ending exactly at ``alpha_max``."""
-        steps = np.arange(self.n_alpha - 1, -1, -1)
-        nodes = self.alpha_max * np.exp(-steps * self.log_alpha_step)
-        nodes[-1] = self.alpha_max
+        """Roughness nodes [-], geometric from exactly ``alpha_min`` to exactly ``alpha_max``."""
+        nodes = self.alpha_min * np.exp(np.arange(self.n_alpha) * self.log_alpha_step)
+        nodes[0], nodes[-1] = self.alpha_min, self.alpha_max
         return nodes
 
     @property
