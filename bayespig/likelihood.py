@@ -752,11 +752,10 @@ class WavelengthModel:
         alpha = alpha[:, 0]
         _stack_members(member, a.shape[0], self.indices.size)
         out = np.empty((a.shape[0], self.n_values))
-        omega = np.maximum(1.0 - a, 0.0)[:, None]
         # the lobe depends on the roughness alone: once per distinct value (one per walker)
         distinct, inverse = np.unique(alpha, return_inverse=True)
         for rough, parts in self._rough_units.values():
-            values = omega * np.exp(rough.interpolate(a, alpha)) + rough.lobe(distinct)[inverse.ravel()]
+            values = rough.body(a, alpha) + rough.lobe(distinct)[inverse.ravel()]
             for part in parts:
                 out[:, part] = values
         return out

@@ -82,10 +82,14 @@ __all__ = [
 ]
 
 #: Bump when the file layout or the tabulated quantities change.
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 #: Default roughness axis [-]: from a fine gloss (alpha = 0.01, a lobe of ~1 deg half width)
 #: to a matt surface (alpha = 1, facets of every slope).
 ROUGHNESS_MIN, ROUGHNESS_MAX = 0.01, 1.0
+#: Bytes of the stencil rows gathered per block of points (the 16 rows of (alpha, a) nodes per
+#: point and channel): bounds the memory of an evaluation of a wide table (1439 Cornell
+#: geometries: 173 points per block, 32 MB).
+GATHER_BYTES = 32 * 2**20
 #: Relative accuracy goal of the table against the direct solver over its domain (that of
 #: :mod:`bayespig.table`).
 ROUGH_TABLE_TOLERANCE = 2e-4
@@ -198,22 +202,47 @@ def _hemispherical_lobe(channel, alpha, n, distribution):
     return float(np.clip(lobe, 0.0, None))
 
 
+def body_columns(instrument):
+    """The distinct body values of an instrument's channels and each channel's column and factor.
+
+    An isotropic opaque body does not depend on the azimuth: it is one value per (hemispherical
+    or not, ``theta_i``, ``theta_o``) (1439 Cornell geometries: 80 columns); a reflectance factor
+    is ``pi`` times the BRDF column.
+
+    Returns
+    -------
+    tuple
+        ``(keys, column, factor)``: the columns' ``(hemispherical, theta_i, theta_o)``, and per
+        channel its column (int) and factor (1 or pi).
+    """
+    keys, column = [], []
+    for ch in instrument.channels:
+        key = (ch.kind == "hemispherical", float(ch.theta_i), float(ch.theta_i if ch.kind == "hemispherical"
+                                                                   else ch.theta_o))
+        if key not in keys:
+            keys.append(key)
+        column.append(keys.index(key))
+    factor = np.array([np.pi if ch.kind == "reflectance_factor" else 1.0 for ch in instrument.channels])
+    return keys, np.array(column, dtype=int), factor
+
+
 def _build_alpha_slice(instrument, settings, alpha):
-    """``log q`` (n_a, K) of the body and the hemispherical channels' lobe (K,) at one roughness."""
-    theta_in, theta_out, index_in, index_out = channel_directions(instrument)
+    """``log q`` (n_a, n_columns) of the body (:func:`body_columns`) and the channels' tabulated
+    lobe (K,; the hemispherical ones, 0 elsewhere) at one roughness."""
+    theta_in, theta_out, _, _ = channel_directions(instrument)
     a = np.minimum(settings.a_nodes, A_MAX_EVAL)
     terms = surface_terms(theta_in, theta_out, a=a, tau=np.full(a.size, np.inf), g=0.0, n=instrument.n,
                           n_points=settings.n_points, roughness=float(alpha), distribution=settings.distribution)
-    K = len(instrument)
-    body = np.empty((a.size, K))
-    lobe = np.zeros(K)
-    for k, ch in enumerate(instrument.channels):
-        if ch.kind == "hemispherical":
-            body[:, k] = terms.h0[:, index_in[k]]
-            lobe[k] = _hemispherical_lobe(ch, alpha, instrument.n, settings.distribution)
-        else:
-            factor = np.pi if ch.kind == "reflectance_factor" else 1.0
-            body[:, k] = factor * terms.f0_modes[:, 0, index_out[k], index_in[k]]  # isotropic: mode 0 only
+    keys, _, _ = body_columns(instrument)
+    body = np.empty((a.size, len(keys)))
+    for j, (hemispherical, theta_i, theta_o) in enumerate(keys):
+        i = int(np.searchsorted(theta_in, theta_i))
+        if hemispherical:
+            body[:, j] = terms.h0[:, i]
+        else:  # isotropic: mode 0 only
+            body[:, j] = terms.f0_modes[:, 0, int(np.searchsorted(theta_out, theta_o)), i]
+    lobe = np.array([_hemispherical_lobe(ch, alpha, instrument.n, settings.distribution)
+                     if ch.kind == "hemispherical" else 0.0 for ch in instrument.channels])
     log_q = np.log(np.maximum(body / (1.0 - a)[:, None], LOG_FLOOR))
     return log_q, lobe
 
@@ -274,8 +303,9 @@ class RoughLookupTable:
     settings : RoughTableSettings
     key : str
     arrays : dict of numpy.ndarray
-        ``log_q`` (n_alpha, n_a, K): log of the body over ``1 - a``; ``lobe`` (n_alpha, K): the
-        hemispherical channels' first-surface part (0 for the other channels).
+        ``log_q`` (n_alpha, n_a, n_columns): log of the body over ``1 - a`` per distinct body
+        value (:func:`body_columns`); ``lobe`` (n_alpha, K): the hemispherical channels'
+        first-surface part (0 for the other channels).
     """
 
     free_g = False
@@ -284,9 +314,11 @@ class RoughLookupTable:
     def __init__(self, instrument, settings, arrays, key):
         self.instrument, self.settings, self.arrays, self.key = instrument, settings, arrays, key
         self.channels = instrument.channels
-        self.n_alpha, self.n_a, self.n_channels = arrays["log_q"].shape
-        #: One row per (alpha, a) node.
-        self.stacked = np.ascontiguousarray(arrays["log_q"].reshape(-1, self.n_channels))
+        self.n_alpha, self.n_a, self.n_columns = arrays["log_q"].shape
+        self.n_channels = len(instrument.channels)
+        _, self._column, self._body_factor = body_columns(instrument)
+        #: One row per (alpha, a) node, one column per distinct body value (:func:`body_columns`).
+        self.stacked = np.ascontiguousarray(arrays["log_q"].reshape(-1, self.n_columns))
         self.alpha_min, self.alpha_max = float(settings.alpha_nodes[0]), float(settings.alpha_nodes[-1])
         self._log_alpha0 = float(np.log(self.alpha_min))
         self._d_log_alpha = float(settings.log_alpha_step)
@@ -323,11 +355,21 @@ class RoughLookupTable:
             raise ValueError(f"roughness must lie in the table's range [{self.alpha_min:g}, {self.alpha_max:g}]")
         return a, roughness
 
+    def body(self, a, roughness):
+        """The body of every channel at validated 1-D ``a`` and ``roughness`` (P,), (P, K) [channel units]."""
+        q = np.exp(self.interpolate_columns(a, roughness))
+        return (np.maximum(1.0 - a, 0.0)[:, None] * q)[:, self._column] * self._body_factor
+
     def interpolate(self, a, roughness):
-        """``log q`` of the body at validated 1-D ``a`` and ``roughness`` (P,), shape (P, K)."""
-        if a.size > EVALUATION_BLOCK:
-            return np.concatenate([self.interpolate(a[i:i + EVALUATION_BLOCK], roughness[i:i + EVALUATION_BLOCK])
-                                   for i in range(0, a.size, EVALUATION_BLOCK)])
+        """``log q`` of every channel's body at validated 1-D ``a`` and ``roughness`` (P,), (P, K)."""
+        return self.interpolate_columns(a, roughness)[:, self._column] + np.log(self._body_factor)
+
+    def interpolate_columns(self, a, roughness):
+        """``log q`` of the distinct body columns (:func:`body_columns`), (P, n_columns)."""
+        block = max(1, min(EVALUATION_BLOCK, GATHER_BYTES // (16 * 8 * self.n_columns)))
+        if a.size > block:
+            return np.concatenate([self.interpolate_columns(a[i:i + block], roughness[i:i + block])
+                                   for i in range(0, a.size, block)])
         u = np.arcsinh(self._a_stretch * np.sqrt(a)) / self._asinh_stretch
         x = (np.log(roughness) - self._log_alpha0) / self._d_log_alpha
         (sx, su), (wx, wu) = lagrange_stencil(np.stack([x, u / self._du]), self._n_axes, 4)
@@ -376,7 +418,7 @@ class RoughLookupTable:
         a, roughness = (np.broadcast_to(v, shape).ravel() for v in (a, roughness))
         out = np.zeros((a.size, self.n_channels))
         if part != "surface":
-            out += np.maximum(1.0 - a, 0.0)[:, None] * np.exp(self.interpolate(a, roughness))
+            out += self.body(a, roughness)
         if part != "body":
             out += self.lobe(roughness)
         return out.reshape(shape + (self.n_channels,))

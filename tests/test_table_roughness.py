@@ -108,9 +108,9 @@ def test_cache_is_read_back_and_its_key_includes_the_roughness_axis(table, priva
 
 
 def test_out_of_range_roughness_and_finite_films_are_refused(table):
-    with pytest.raises(ValueError, match=r"^roughness must lie in the table's range \[0\.00929068, 1\]$"):
+    with pytest.raises(ValueError, match=r"^roughness must lie in the table's range \[0\.01, 1\]$"):
         table(a=0.2, roughness=1.5)
-    with pytest.raises(ValueError, match=r"^roughness must lie in the look-up table's range \[0\.00929068, 1\], "
+    with pytest.raises(ValueError, match=r"^roughness must lie in the look-up table's range \[0\.01, 1\], "
                                          r"got 2\.0$"):
         FixedRoughnessTable(table, 2.0)
     fixed = FixedRoughnessTable(table, 0.1)

@@ -17,7 +17,7 @@ from ..likelihood import (
     check_observed,
     multiplicative_normal_logpdf,
 )
-from ..rough_table import ROUGHNESS_MIN
+from ..rough_table import ROUGHNESS_MAX, ROUGHNESS_MIN
 from ..selection import select_measurements
 from .arguments import (
     DEFAULT_EPS,
@@ -409,6 +409,10 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     priors, settings = check_priors(priors), check_settings(settings)
     substrate_sd = check_substrate_sd(substrate_sd)
     noise_floor = noise_floor_argument(noise_floor)
+    roughness = roughness_argument(roughness)
+    if isinstance(roughness, float) and roughness > 0 and not ROUGHNESS_MIN <= roughness <= ROUGHNESS_MAX:
+        raise ValueError(f"roughness {roughness:g} is outside the range of the look-up tables of a rough surface "
+                         f"[{ROUGHNESS_MIN:g}, {ROUGHNESS_MAX:g}] (0 for a smooth surface)")
     if substrate_sd is not None and (g != "isotropic" or eps == "infer"):
         raise ValueError("substrate_sd needs g='isotropic' and a known eps (the joint run over all "
                          "wavelengths does not sample g or eps)")
