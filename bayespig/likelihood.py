@@ -751,11 +751,16 @@ class WavelengthModel:
                              f"({a.shape[0]}, 1), got {np.shape(roughness)}")
         alpha = alpha[:, 0]
         _stack_members(member, a.shape[0], self.indices.size)
-        out = np.empty((a.shape[0], self.n_values))
+        out = np.empty((a.shape[0], self.n_values)) if len(self._rough_units) > 1 or any(
+            len(parts) > 1 for _, parts in self._rough_units.values()) else None
         # the lobe depends on the roughness alone: once per distinct value (one per walker)
         distinct, inverse = np.unique(alpha, return_inverse=True)
-        for rough, parts in self._rough_units.values():
-            values = rough.body(a, alpha) + rough.lobe(distinct)[inverse.ravel()]
+        units = list(self._rough_units.values())
+        for rough, parts in units:
+            values = rough.body(a, alpha)
+            values += rough.lobe(distinct)[inverse.ravel()]
+            if len(units) == 1 and len(parts) == 1 and parts[0] == slice(0, self.n_values):
+                return values  # one film: no copy
             for part in parts:
                 out[:, part] = values
         return out

@@ -317,6 +317,7 @@ class RoughLookupTable:
         self.n_alpha, self.n_a, self.n_columns = arrays["log_q"].shape
         self.n_channels = len(instrument.channels)
         _, self._column, self._body_factor = body_columns(instrument)
+        self._any_factor = bool((self._body_factor != 1.0).any())
         #: One row per (alpha, a) node, one column per distinct body value (:func:`body_columns`).
         self.stacked = np.ascontiguousarray(arrays["log_q"].reshape(-1, self.n_columns))
         self.alpha_min, self.alpha_max = float(settings.alpha_nodes[0]), float(settings.alpha_nodes[-1])
@@ -358,7 +359,11 @@ class RoughLookupTable:
     def body(self, a, roughness):
         """The body of every channel at validated 1-D ``a`` and ``roughness`` (P,), (P, K) [channel units]."""
         q = np.exp(self.interpolate_columns(a, roughness))
-        return (np.maximum(1.0 - a, 0.0)[:, None] * q)[:, self._column] * self._body_factor
+        q *= np.maximum(1.0 - a, 0.0)[:, None]
+        body = q[:, self._column]
+        if self._any_factor:
+            body *= self._body_factor
+        return body
 
     def interpolate(self, a, roughness):
         """``log q`` of every channel's body at validated 1-D ``a`` and ``roughness`` (P,), (P, K)."""

@@ -7,7 +7,7 @@ Run from the repository root (prints only; loads both cores for a few minutes)::
 The file ``../shared/data/cornell/garnet_red.astm`` (1439 geometries x 31 bands, an opaque paint
 under a frosted overcoat) read with ``read_measurements(path, opaque=True)``, all geometries and
 bands, ``infer(..., roughness="free", noise_floor="infer")`` (zeros are data; ``eps`` the
-default 0.05). Goal: <= 5 min on 2 cores and <= 2 GB peak memory.
+default 0.05), :data:`DRAWS_PER_CHAIN` stored draws per chain. Goal: <= 5 min on 2 cores and <= 2 GB peak memory.
 
 Printed: the rough look-up table's build (or load) time and size, the wall time of ``infer``,
 peak resident memory of this process and of its worker processes (``resource.getrusage``),
@@ -31,7 +31,14 @@ from bayespig.likelihood import Problem
 from bayespig.rough_table import load_rough_table
 from bayespig.selection import mirror_distance_deg
 
-PATH = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "cornell" / "garnet_red.astm"
+#: ``../shared/data/cornell`` beside the checkout (a worktree under ``wt/`` looks one level up too).
+CANDIDATES = [Path(__file__).resolve().parents[k] / "shared" / "data" / "cornell" / "garnet_red.astm"
+              for k in (2, 3)]
+PATH = next((p for p in CANDIDATES if p.is_file()), CANDIDATES[0])
+#: Stored draws per chain (4 chains: 1024 draws, the target ESS). The default 1024 stores a
+#: prediction and a pointwise log-likelihood per draw and value: 4096 x 31 x 1439 x 2 x 4 bytes
+#: = 1.5 GB of output alone for this file, beyond the 2 GB goal once stacked.
+DRAWS_PER_CHAIN = 256
 #: Geometries at least this far from the mirror direction enter the printed residuals [deg].
 MIRROR_CUT_DEG = 2.0
 
@@ -47,6 +54,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--path", default=str(PATH))
     parser.add_argument("--max-steps", type=int, default=None)
+    parser.add_argument("--draws-per-chain", type=int, default=DRAWS_PER_CHAIN)
     args = parser.parse_args(argv)
     path = Path(args.path)
     if not path.is_file():
@@ -62,7 +70,7 @@ def main(argv=None):
           f"{table.nbytes / 1e6:.1f} MB, {'built' if hasattr(table, 'build_seconds') else 'loaded'} in "
           f"{time.perf_counter() - t:.1f} s")
     overrides = {} if args.max_steps is None else {"max_steps": args.max_steps}
-    settings = InferenceSettings(**overrides)
+    settings = InferenceSettings(draws_per_chain=args.draws_per_chain, **overrides)
     t = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

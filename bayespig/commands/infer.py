@@ -188,6 +188,13 @@ def run_infer(args):
     for factor in card_factors(idata):
         print(f"card {factor['card']}: r_s factor {factor['median']:.3f} [{factor['low']:.3f}, "
               f"{factor['high']:.3f}] (90 %; prior sd {factor['relative_sd']:g} in log f)")
+    if "roughness" in idata.posterior:
+        alpha = np.asarray(idata.posterior["roughness"].values, dtype=float).ravel()
+        low, median, high = np.quantile(alpha, [0.05, 0.5, 0.95])
+        print(f"surface roughness alpha {median:.4g} [{low:.4g}, {high:.4g}] (90 %; prior log-uniform on the "
+              "rough tables' range)")
+    elif idata.posterior.attrs.get("roughness_mode") == "fixed":
+        print(f"surface roughness alpha {idata.posterior.attrs['roughness']:g} (fixed)")
     print(f"wrote {posterior_path} and {summary_path}")
     sys.stdout.flush()
     untestable = np.flatnonzero(~check["testable"] & ~check["flagged"])

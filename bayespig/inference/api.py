@@ -37,7 +37,13 @@ from .card_factors import CardFactors, card_indices
 from .executors import _WORKER_TABLES, _Task, run_tasks
 from .outputs import _inference_data
 from .settings import ConvergenceWarning
-from .roughness import NoiseFloorFilmLayout, RoughnessSpec, roughness_argument, sample_roughness
+from .roughness import (
+    PILOT_DRAWS_PER_CHAIN,
+    NoiseFloorFilmLayout,
+    RoughnessSpec,
+    roughness_argument,
+    sample_roughness,
+)
 from .shared import pilot_draws, sample_joint
 
 #: The pilot of a joint run only starts it (the adaptation run and the burn-in follow): it runs
@@ -200,12 +206,15 @@ def _sample_shared(problem, model, priors, eps, settings, seed, specs, executor,
         settings, target_ess=min(settings.target_ess, PILOT_TARGET_ESS),
         min_autocorr_multiple=min(settings.min_autocorr_multiple, PILOT_AUTOCORR_MULTIPLE),
         min_steps=min(settings.min_steps, PILOT_MIN_STEPS))
+    floored = noise_floor == "infer"
+    if floored or model.rough:  # the records of the pilot are not kept: few stored draws
+        pilot_settings = dataclasses.replace(
+            pilot_settings, draws_per_chain=min(pilot_settings.draws_per_chain, PILOT_DRAWS_PER_CHAIN))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         pilot = infer_problem(problem, seed=int(pilot_seed.generate_state(1)[0]), g="isotropic", eps=eps,
                               executor=executor, progress=progress, priors=priors, settings=pilot_settings,
                               tables=model.tables, noise_floor=noise_floor, roughness=model.roughness)
-    floored = noise_floor == "infer"
     if not floored and problem.groups:  # the card factors' path, as before
         return sample_joint(model, specs, pilot_draws(pilot), priors, eps, settings, joint_seed, start_seed)
     layout = NoiseFloorFilmLayout(model, priors, eps) if floored else model

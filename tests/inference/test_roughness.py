@@ -5,13 +5,14 @@ The simulated film's values come from the direct solver (:func:`bayespig.brdf` w
 ``roughness=``), not from the look-up tables the inference uses.
 """
 
+import dataclasses
 import json
 
 import numpy as np
 import pytest
 
 from bayespig import cli
-from bayespig.data import simulate
+from bayespig.data import MeasurementSet, simulate
 from bayespig.data.simulate import FilmSpec
 from bayespig.inference import infer
 from bayespig.inference.outputs import PRIOR_BOUNDS_ATTR
@@ -151,3 +152,22 @@ def test_cli_roughness_is_checked_in_plain_words(tmp_path, capsys):
     assert status == 2
     assert err.strip().splitlines()[-1] == f"bayespig: error: --roughness must be {EXPECTED}, got 'shiny'"
     assert "Traceback" not in err and not (tmp_path / "out").exists()
+
+
+def test_free_roughness_with_an_inferred_noise_floor_takes_zeros_as_data(rough_set):
+    # the darkest readings of the first band set to exact zeros, as a clipping instrument reports them
+    sample = rough_set.samples[0]
+    first = sample.measurements[0]
+    values = np.asarray(first.values, dtype=float).copy()
+    values[0] = 0.0
+    zeroed = dataclasses.replace(sample, measurements=(dataclasses.replace(first, values=values),)
+                                 + tuple(sample.measurements[1:]))
+    measurements = MeasurementSet(rough_set.wavelength_nm, [zeroed], n=rough_set.n, metadata={},
+                                  source=rough_set.source)
+    idata = infer(measurements, eps=EPS_TRUE, noise_floor="infer", settings=FAST, progress=False,
+                  wavelengths=[450.0, 550.0, 650.0])
+    assert idata.posterior["noise_floor"].dims == ("chain", "draw", "wavelength")
+    assert idata.posterior.attrs["noise_floor_mode"] == "inferred"
+    low, high = _interval(idata.posterior["roughness"].values.reshape(-1))
+    assert low <= ALPHA_TRUE <= high, (low, high)
+
