@@ -259,7 +259,8 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
                          "RoughnessSpec in shared= to infer it)")
     if shared and noise_floor is not None and noise_floor != "infer":
         raise ValueError(f"noise_floor is not available with {' and '.join(spec.title for spec in shared)} "
-                         "(the joint run over all wavelengths has no noise floor yet)")
+                         "(the joint run over all wavelengths infers one floor per band, noise_floor='infer', "
+                         "or has none)")
     check_observed(problem, noise_floor)
     started = time.perf_counter()
     tables = {} if tables is None else tables
@@ -428,6 +429,9 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     if substrate_sd is not None and noise_floor is not None:
         raise ValueError("noise_floor is not available with substrate_sd (the joint run over all "
                          "wavelengths has no noise floor yet)")
+    if roughness == "free" and isinstance(noise_floor, float):
+        raise ValueError(f"roughness='free' needs noise_floor None or 'infer' (the joint run over all wavelengths "
+                         f"infers one floor per band or has none), got {noise_floor!r}")
     selection = {"exclude_mirror_deg": exclude_mirror_deg, "max_angle_deg": max_angle_deg,
                      "wavelengths": wavelengths, "wavelength_range": wavelength_range}
     check_selection(**selection)

@@ -140,6 +140,11 @@ def test_free_roughness_needs_a_known_eps_and_opaque_films(rough_set):
     assert str(caught.value) == (
         "roughness='free' needs g='isotropic', a known eps and no substrate_sd (the joint run over all "
         "wavelengths does not sample g or eps); pass roughness=<number> to fix the roughness")
+    with pytest.raises(ValueError) as caught:
+        infer(rough_set, roughness="free", noise_floor=0.001, progress=False)
+    assert str(caught.value) == (
+        "roughness='free' needs noise_floor None or 'infer' (the joint run over all wavelengths infers one floor "
+        "per band or has none), got 0.001")
     thin = simulate(a=0.2, tau=2.0, design="method3", instrument=INSTRUMENT, wavelengths=[500.0], eps=0.02, seed=1)
     with pytest.raises(ValueError) as caught:
         infer(thin, roughness=0.1, progress=False)
