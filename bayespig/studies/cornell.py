@@ -109,7 +109,7 @@ class CornellStudySettings:
     incidences_deg: tuple | None = None
     max_geometries: int | None = None
     inference: InferenceSettings = dataclasses.field(
-        default_factory=lambda: InferenceSettings(draws_per_chain=256, target_ess=400, max_steps=3000))
+        default_factory=lambda: InferenceSettings(draws_per_chain=256, target_ess=400, max_steps=1000))
     seed: int = 0
 
 
@@ -258,8 +258,9 @@ def cornell_study(folder=None, settings=None, paints=None, progress=None):
     """
     folder = Path(folder) if folder is not None else default_cornell_path()
     settings = settings or CornellStudySettings()
-    say = progress or (lambda message: None)
     started = time.perf_counter()
+    say = ((lambda message: progress(f"[{time.perf_counter() - started:.0f} s] {message}")) if progress
+           else (lambda message: None))
     out = {"folder": folder, "settings": settings, "paints": {}}
     for paint in paints or PAINTS:
         measurements = _thin_geometries(read_measurements(folder / f"{paint}.astm", opaque=True),
@@ -273,13 +274,13 @@ def cornell_study(folder=None, settings=None, paints=None, progress=None):
         bands = None if settings.full_bands is None else list(settings.full_bands)
         say(f"{paint}: full fit, {result['counts']['full']} geometries, roughness free")
         result["full"] = _infer(full, settings, roughness="free", wavelengths=bands)
-        say(f"{paint}: smooth model at {', '.join(f'{b:g}' for b in settings.smooth_bands)} nm")
-        result["smooth"] = _infer(full, settings, roughness=0.0, wavelengths=list(settings.smooth_bands))
         subset_bands = None if settings.subset_bands is None else list(settings.subset_bands)
         for name in ("far", "near"):
             say(f"{paint}: subset '{name}', {result['counts'][name]} geometries")
             result[name] = _infer(far if name == "far" else near, settings, roughness="free",
                                   wavelengths=subset_bands)
+        say(f"{paint}: smooth model at {', '.join(f'{b:g}' for b in settings.smooth_bands)} nm")
+        result["smooth"] = _infer(full, settings, roughness=0.0, wavelengths=list(settings.smooth_bands))
         result["overlap"] = interval_overlap(result["far"]["a"][[0, 2]], result["near"]["a"][[0, 2]])
         out["paints"][paint] = result
     out["seconds"] = time.perf_counter() - started
@@ -319,8 +320,8 @@ def _spectrum_figure(paint, result):
     ax = fig.subplots()
     for key, label, colour in (("full", f"rough, > {MIRROR_CUT_DEG:g}° from the mirror", "k"),
                                ("far", f"rough, > {SUBSET_SPLIT_DEG:g}° (<= {SUBSET_MAX_ANGLE_DEG:g}°)", "C0"),
-                               ("near", f"rough, {MIRROR_CUT_DEG:g}-{SUBSET_SPLIT_DEG:g}° "
-                                        f"(<= {SUBSET_MAX_ANGLE_DEG:g}°)", "C1"),
+                               ("near", (f"rough, {MIRROR_CUT_DEG:g}-{SUBSET_SPLIT_DEG:g}° "
+                                        f"(<= {SUBSET_MAX_ANGLE_DEG:g}°)"), "C1"),
                                ("smooth", "smooth surface, > 2°", "C3")):
         fit = result[key]
         wl, a = fit["wavelength_nm"], fit["a"]
@@ -335,6 +336,16 @@ def _spectrum_figure(paint, result):
     ax.legend(fontsize=8)
     ax.set_title(f"{PAINTS.get(paint, paint)}: a(λ), median and 90 % interval", fontsize=10)
     return fig
+
+
+def _grouped_diagnostics(diagnostics):
+    """``diagnose`` lines (``"<band> nm: <text>"``) with the bands of identical text joined."""
+    groups = {}
+    for line in diagnostics:
+        band, _, text = line.partition(": ")
+        groups.setdefault(text if text else band, []).append(band if text else "")
+    return [(f"{', '.join(b for b in bands if b)}: " if any(bands) else "") + text
+            for text, bands in groups.items()]
 
 
 def _present(values, wanted):
@@ -353,16 +364,16 @@ def cornell_report(study):
     settings = study["settings"]
     files = {}
     lines = ["# Cornell gonio paints: rough-surface fits (issue 16)", "",
-             "Regenerate with one command (from the repository root; data in `../shared/data/cornell` or "
-             "`$BAYESPIG_CORNELL`):", "", "    bayespig cornell", "",
-             f"Data: `{study['folder']}` (Cornell Program of Computer Graphics gonioreflectometer, ASTM E1392; "
-             "see its README). Each paint is read as an opaque film (`read_measurements(path, opaque=True)`).",
+             ("Regenerate with one command (from the repository root; data in `../shared/data/cornell` or "
+             "`$BAYESPIG_CORNELL`):"), "", "    bayespig cornell", "",
+             (f"Data: `{study['folder']}` (Cornell Program of Computer Graphics gonioreflectometer, ASTM E1392; "
+             "see its README). Each paint is read as an opaque film (`read_measurements(path, opaque=True)`)."),
              "",
-             "Model: opaque isotropic layer under a rough GGX air/binder surface (`bayespig.physics.rough_surface`), "
+             ("Model: opaque isotropic layer under a rough GGX air/binder surface (`bayespig.physics.rough_surface`), "
              "roughness alpha one parameter shared by all bands (log-uniform on 0.01..1), a per-band noise floor "
              f"inferred (log-uniform), eps fixed at {EPS:g}: the joint roughness sampler needs a known eps, the "
              "floor takes the absolute noise of dark values and of the exact zeros, and a fixed eps keeps misfit "
-             "visible in the model check rather than absorbed by a growing eps.", "",
+             "visible in the model check rather than absorbed by a growing eps."), "",
              f"Sampler: {settings.inference.n_walkers} walkers x {settings.inference.n_ensembles} ensembles, "
              f"target ESS {settings.inference.target_ess:g}, at most {settings.inference.max_steps} steps, "
              f"{settings.inference.draws_per_chain} stored draws per chain; seed {settings.seed}. "
@@ -388,30 +399,30 @@ def cornell_report(study):
         lines += [f"**Roughness alpha (GGX): {_interval(*r, digits=4)}** (median [90 % interval]).", ""]
         for line in full["warnings"]:
             lines += [f"- warning: {line}"]
-        for line in full["diagnostics"]:
-            lines += [f"- not converged: {line}"]
+        lines += [f"- not converged: {line}" for line in _grouped_diagnostics(full["diagnostics"])]
         lines += [""] if full["warnings"] or full["diagnostics"] else []
         # goals
         body_wl, body_res, residual_ok = _body_residual_goal(paint, full)
         overlap = result["overlap"]
         share = float(np.mean(overlap)) if overlap.size else float("nan")
         overlap_ok = bool(share >= OVERLAP_GOAL)
-        goals.append((name, body_wl, body_res, residual_ok, share, overlap_ok, overlap.size))
+        goals.append((name, body_wl, body_res, residual_ok, share, overlap_ok, overlap.size,
+                      " / ".join(_interval(*result[k]["roughness"], digits=3) for k in ("full", "far", "near"))))
         lines += ["### Goals", "",
-                  f"- Median |residual| <= {_pct(RESIDUAL_GOAL)} at {BODY_BANDS_NM[paint][0]:g}-"
+                  (f"- Median |residual| <= {_pct(RESIDUAL_GOAL)} at {BODY_BANDS_NM[paint][0]:g}-"
                   f"{BODY_BANDS_NM[paint][1]:g} nm: **{'met' if residual_ok else 'NOT met'}** "
                   f"(worst {_pct(float(np.max(body_res))) if body_res.size else 'n/a'}, "
-                  f"{int(np.sum(body_res <= RESIDUAL_GOAL))} of {body_res.size} bands within).",
-                  f"- Subset intervals overlap at >= {_pct(OVERLAP_GOAL)} of bands: "
+                  f"{int(np.sum(body_res <= RESIDUAL_GOAL))} of {body_res.size} bands within)."),
+                  (f"- Subset intervals overlap at >= {_pct(OVERLAP_GOAL)} of bands: "
                   f"**{'met' if overlap_ok else 'NOT met'}** ({int(overlap.sum())} of {overlap.size} bands, "
-                  f"{_pct(share)}).", ""]
+                  f"{_pct(share)})."), ""]
         # a(lambda) table
         check = full["check"]
         lines += ["### a(λ), noise floor, residuals and the model check (full fit)", "",
-                  "Residual: median |x_obs / x_fit - 1| over the fitted geometries (all > 2° from the mirror), "
+                  ("Residual: median |x_obs / x_fit - 1| over the fitted geometries (all > 2° from the mirror), "
                   "x_fit the posterior median of the noise-free BRDF. Model check: posterior predictive "
                   f"p-value of the chi-square (eps {EPS:g} and the floor; `bayespig.report.quantities."
-                  "posterior_predictive_check`).", ""]
+                  "posterior_predictive_check`)."), ""]
         rows = []
         for i, w in enumerate(wl):
             rows.append([f"{w:g}", _interval(full["a"][0, i], full["a"][1, i], full["a"][2, i]),
@@ -422,8 +433,8 @@ def cornell_report(study):
         spectrum = f"cornell/{paint}_a.png"
         files[spectrum] = figs.to_png(_spectrum_figure(paint, result))
         lines += [f"![a(λ) of {paint}]({spectrum})", "",
-                  "a(λ): full rough fit (black), the two consistency subsets (blue, orange) and the smooth "
-                  "model (red), medians and 90 % intervals.", ""]
+                  ("a(λ): full rough fit (black), the two consistency subsets (blue, orange) and the smooth "
+                  "model (red), medians and 90 % intervals."), ""]
         # distance classes
         gonio = full["gonio"]
         lines += ["Median |residual| by distance from the mirror (full fit):", "",
@@ -447,8 +458,8 @@ def cornell_report(study):
             path = f"cornell/{paint}_residual_map.png"
             files[path] = figs.to_png(figs.residual_map_figure(gonio, incidences))
             lines += [f"![residual map, {paint}]({path})", "",
-                      "Relative residual (measured - fitted) / fitted, median over the bands, over viewing "
-                      "directions (azimuth delta_phi from the source, radius theta_o); red: model too dark.", ""]
+                      ("Relative residual (measured - fitted) / fitted, median over the bands, over viewing "
+                      "directions (azimuth delta_phi from the source, radius theta_o); red: model too dark."), ""]
         # subset consistency
         far, near = result["far"], result["near"]
         lines += ["### Subset consistency", "",
@@ -485,11 +496,15 @@ def cornell_report(study):
         lines += [""]
     summary = ["## Summary of the goals", "",
                _table(["paint", "body bands", "median residual there", "residual goal", "subset overlap",
-                       "overlap goal"],
+                       "overlap goal", "roughness: full / far / near subset"],
                       [[n, f"{bw[0]:g}-{bw[-1]:g} nm" if bw.size else "none fitted",
                         ", ".join(_pct(v) for v in br) or "n/a", "met" if rok else "NOT met",
-                        f"{_pct(sh)} of {nb} bands", "met" if ook else "NOT met"]
-                       for n, bw, br, rok, sh, ook, nb in goals]), ""]
+                        f"{_pct(sh)} of {nb} bands", "met" if ook else "NOT met", alphas]
+                       for n, bw, br, rok, sh, ook, nb, alphas in goals]), "",
+               ("The roughness of the two subsets, each a single GGX alpha for all bands, tells whether one "
+                "microfacet surface describes the paint near and far from the mirror alike: where their "
+                "intervals are apart, the surface model (not the pigment) is what the data reject, and the "
+                "subsets' a(λ) need not agree either."), ""]
     head = lines[:lines.index(f"## {PAINTS.get(next(iter(study['paints'])), next(iter(study['paints'])))} "
                               f"(`{next(iter(study['paints']))}.astm`)")] if study["paints"] else lines
     text = "\n".join(head + summary + lines[len(head):]) + "\n"
