@@ -326,11 +326,12 @@ def _spectrum_figure(paint, result):
         fit = result[key]
         wl, a = fit["wavelength_nm"], fit["a"]
         style = "-" if wl.size > 3 else "o"
-        ax.fill_between(wl, a[0], a[2], color=colour, alpha=0.2, lw=0) if wl.size > 1 else None
+        if wl.size > 3:  # a band between a few scattered bands would suggest values in between
+            ax.fill_between(wl, a[0], a[2], color=colour, alpha=0.2, lw=0)
         ax.errorbar(wl, a[1], yerr=[a[1] - a[0], a[2] - a[1]], fmt=style, color=colour, ms=4, lw=1.2,
                     capsize=2, label=label)
     ax.set_xlabel("wavelength [nm]")
-    ax.set_ylabel("single-scattering albedo a [-]")
+    ax.set_ylabel("relative absorption a = 1 - ω [-]")
     ax.set_ylim(-0.02, 1.02)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
