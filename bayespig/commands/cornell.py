@@ -24,7 +24,7 @@ def add_cornell_parser(subparsers):
         description="Fit the two Cornell gonio paints (garnet red, Krylon blue) as opaque films under a "
         "rough surface (roughness and a noise floor inferred), check that geometry subsets agree, compare "
         "with the smooth surface, and write the report (reports/cornell.md and reports/cornell/*.png). "
-        "Takes about 15 min on 2 shared cores.",
+        "Takes about 10 min on 2 shared cores.",
     )
     parser.add_argument("path", nargs="?", default=None,
                         help="folder of the Cornell data (default $BAYESPIG_CORNELL, else ../shared/data/cornell "
@@ -36,7 +36,7 @@ def add_cornell_parser(subparsers):
     parser.add_argument("--full-bands", type=float, nargs="*", default=None, metavar="NM",
                         help="bands of the full fit [nm] (default all 31)")
     parser.add_argument("--max-steps", type=int, default=None,
-                        help="cap of every run's steps per walker (default 1000)")
+                        help="cap of every run's steps per walker (default 2000)")
     parser.add_argument("--draws-per-chain", type=int, default=None,
                         help="stored draws per chain (default 256)")
     parser.add_argument("--seed", type=int, default=0, help="seed of every fit (default 0)")
