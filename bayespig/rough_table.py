@@ -72,9 +72,9 @@ from .table import (
 )
 
 __all__ = [
-    "FixedRoughnessTable",
     "ROUGHNESS_MAX",
     "ROUGHNESS_MIN",
+    "FixedRoughnessTable",
     "RoughLookupTable",
     "RoughTableSettings",
     "build_rough_table",
@@ -500,7 +500,9 @@ class FixedRoughnessTable:
         # d log q / da by a central difference of the interpolant in v(a) (inside the axis)
         u = np.arcsinh(rough._a_stretch * np.sqrt(flat)) / rough._asinh_stretch
         lo, hi = np.clip(u - step, 0.0, 1.0), np.clip(u + step, 0.0, 1.0)
-        a_of = lambda v: (np.sinh(v * rough._asinh_stretch) / rough._a_stretch) ** 2  # noqa: E731
+        def a_of(v):
+            return (np.sinh(v * rough._asinh_stretch) / rough._a_stretch) ** 2
+
         alpha = np.full(flat.shape, self.roughness)
         q_lo = np.exp(rough.interpolate(np.clip(a_of(lo), 0.0, 1.0), alpha))
         q_hi = np.exp(rough.interpolate(np.clip(a_of(hi), 0.0, 1.0), alpha))

@@ -36,7 +36,6 @@ from .arguments import (
 from .card_factors import CardFactors, card_indices
 from .executors import _WORKER_TABLES, _Task, run_tasks
 from .outputs import _inference_data
-from .settings import ConvergenceWarning
 from .roughness import (
     PILOT_DRAWS_PER_CHAIN,
     NoiseFloorFilmLayout,
@@ -44,6 +43,7 @@ from .roughness import (
     roughness_argument,
     sample_roughness,
 )
+from .settings import ConvergenceWarning
 from .shared import pilot_draws, sample_joint
 
 #: The pilot of a joint run only starts it (the adaptation run and the burn-in follow): it runs
@@ -254,12 +254,13 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     noise_floor = noise_floor_argument(noise_floor)
     shared = tuple(shared) if shared is not None else ()
     roughness = roughness_argument(roughness)
-    if not isinstance(roughness, float):
+    if roughness is None or roughness == "free":
         raise ValueError(f"roughness must be a number >= 0 for infer_problem, got {roughness!r} (pass a "
                          "RoughnessSpec in shared= to infer it)")
     if shared and noise_floor is not None and noise_floor != "infer":
         raise ValueError(f"noise_floor is not available with {' and '.join(spec.title for spec in shared)} "
-                         "(the joint run over all wavelengths has no noise floor yet)")
+                         "(the joint run over all wavelengths infers one floor per band, noise_floor='infer', "
+                         "or has none)")
     check_observed(problem, noise_floor)
     started = time.perf_counter()
     tables = {} if tables is None else tables
@@ -376,7 +377,7 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         surface)``; needs ``g="isotropic"`` and a known ``eps``; ``noise_floor`` None or
         ``"infer"``). A number > 0: fixed at that value. 0: the smooth surface, exactly the
         smooth model of before. Default (None): ``"free"`` for a set whose films are all opaque
-        and that has BRDF channels, else 0 (sphere-only sets, and films over a visible
+        and that has BRDF channels (with ``g="isotropic"`` and a known ``eps``), else 0 (sphere-only sets, and films over a visible
         substrate, for which the rough tables have no ``tau`` axis yet). Rough surfaces need
         opaque films and isotropic scattering.
 
@@ -428,6 +429,9 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     if substrate_sd is not None and noise_floor is not None:
         raise ValueError("noise_floor is not available with substrate_sd (the joint run over all "
                          "wavelengths has no noise floor yet)")
+    if roughness == "free" and isinstance(noise_floor, float):
+        raise ValueError(f"roughness='free' needs noise_floor None or 'infer' (the joint run over all wavelengths "
+                         f"infers one floor per band or has none), got {noise_floor!r}")
     selection = {"exclude_mirror_deg": exclude_mirror_deg, "max_angle_deg": max_angle_deg,
                      "wavelengths": wavelengths, "wavelength_range": wavelength_range}
     check_selection(**selection)
@@ -467,11 +471,10 @@ def _resolve_roughness(roughness, problem, g, eps, substrate_sd):
     if roughness is None:
         opaque = all(film.kind == "reflectance" and film.opaque for film in problem.films)
         return "free" if opaque and _has_brdf(problem) and g == "isotropic" and eps != "infer" else 0.0
-    if roughness == "free":
-        if g != "isotropic" or eps == "infer" or substrate_sd is not None:
-            raise ValueError("roughness='free' needs g='isotropic', a known eps and no substrate_sd (the joint "
-                             "run over all wavelengths does not sample g or eps); pass roughness=<number> to "
-                             "fix the roughness")
+    if roughness == "free" and (g != "isotropic" or eps == "infer" or substrate_sd is not None):
+        raise ValueError("roughness='free' needs g='isotropic', a known eps and no substrate_sd (the joint "
+                         "run over all wavelengths does not sample g or eps); pass roughness=<number> to "
+                         "fix the roughness")
     return roughness
 
 
@@ -493,7 +496,7 @@ def _nominal_roughness(problem, priors, noise_floor):
     low, high = model.roughness_range
     fitted = _point_fit_problem(problem) if noise_floor is not None else problem
     settings = FitSettings(a_bounds=tuple(float(v) for v in priors.a_range))
-    scan = np.geomspace(low, high, int(round(np.log10(high / low) * NOMINAL_SCAN_PER_DECADE)) + 1)
+    scan = np.geomspace(low, high, round(np.log10(high / low) * NOMINAL_SCAN_PER_DECADE) + 1)
     costs = []
     for alpha in scan:
         ForwardModel(problem, tables=tables, roughness=float(alpha))

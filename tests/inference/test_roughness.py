@@ -14,7 +14,7 @@ import pytest
 from bayespig import cli
 from bayespig.data import MeasurementSet, simulate
 from bayespig.data.simulate import FilmSpec
-from bayespig.inference import infer
+from bayespig.inference import infer, load_inference
 from bayespig.inference.outputs import PRIOR_BOUNDS_ATTR
 from bayespig.instruments import get_instrument
 from bayespig.physics.forward import brdf
@@ -29,6 +29,11 @@ ALPHA_TRUE = 0.08
 EPS_TRUE = 0.02
 A_TRUE = np.linspace(0.02, 0.6, 5)
 WAVELENGTHS = np.linspace(450.0, 650.0, 5)
+#: The CLI run fits one band (450 nm, the darkest): its alpha is 0.0818 [0.080x, 0.0836] (90 %),
+#: 2.3 % from the truth; the printed median must be within 5 % of it (a gross error, not coverage).
+CLI_ALPHA_RELATIVE = 0.05
+#: The CLI prints 4 significant digits.
+PRINTED_DIGITS_RELATIVE = 5e-4
 #: Central posterior interval that must cover each truth.
 COVERAGE = 0.90
 #: In-plane and out-of-plane geometries, a few near the mirror direction (where the lobe tells
@@ -120,8 +125,8 @@ def test_roughness_zero_is_todays_smooth_model_bit_for_bit_on_a_sphere_only_set(
     (float("nan"), ValueError, f"roughness must be {EXPECTED}, got nan"),
     (True, TypeError, f"roughness must be {EXPECTED}, got bool True"),
     ([0.1], TypeError, f"roughness must be {EXPECTED}, got list [0.1]"),
-    (1.5, ValueError, "roughness 1.5 is outside the range of the look-up tables of a rough surface [0.01, 1] "
-                      "(0 for a smooth surface)"),
+    (1.5, ValueError, ("roughness 1.5 is outside the range of the look-up tables of a rough surface [0.01, 1] "
+                       "(0 for a smooth surface)")),
 ])
 def test_bad_roughness_is_refused_naming_the_argument(rough_set, value, error, message):
     with pytest.raises(error) as caught:
@@ -135,6 +140,11 @@ def test_free_roughness_needs_a_known_eps_and_opaque_films(rough_set):
     assert str(caught.value) == (
         "roughness='free' needs g='isotropic', a known eps and no substrate_sd (the joint run over all "
         "wavelengths does not sample g or eps); pass roughness=<number> to fix the roughness")
+    with pytest.raises(ValueError) as caught:
+        infer(rough_set, roughness="free", noise_floor=0.001, progress=False)
+    assert str(caught.value) == (
+        "roughness='free' needs noise_floor None or 'infer' (the joint run over all wavelengths infers one floor "
+        "per band or has none), got 0.001")
     thin = simulate(a=0.2, tau=2.0, design="method3", instrument=INSTRUMENT, wavelengths=[500.0], eps=0.02, seed=1)
     with pytest.raises(ValueError) as caught:
         infer(thin, roughness=0.1, progress=False)
@@ -171,3 +181,19 @@ def test_free_roughness_with_an_inferred_noise_floor_takes_zeros_as_data(rough_s
     low, high = _interval(idata.posterior["roughness"].values.reshape(-1))
     assert low <= ALPHA_TRUE <= high, (low, high)
 
+
+def test_cli_infers_the_roughness_of_a_rough_set_and_prints_it(rough_set, tmp_path, capsys):
+    path = tmp_path / "rough.csv"
+    rough_set.to_csv(path)
+    status = cli.main(["infer", str(path), "--out", str(tmp_path / "out"), "--eps", str(EPS_TRUE),
+                       "--wavelengths", "450", "--roughness", "free", "--no-progress"])
+    out = capsys.readouterr().out
+    assert status == 0
+    line = next(row for row in out.splitlines() if row.startswith("surface roughness alpha "))
+    median, low, high = (float(x) for x in line.split(" (90 %")[0][len("surface roughness alpha "):]
+                         .replace("[", "").replace("]", "").replace(",", "").split())
+    # the printed numbers are the stored posterior's (its coverage is tested above, on every band)
+    stored = load_inference(tmp_path / "out" / "posterior.nc").posterior["roughness"].values.ravel()
+    expected = np.quantile(stored, [0.5, 0.05, 0.95])
+    np.testing.assert_allclose([median, low, high], expected, rtol=PRINTED_DIGITS_RELATIVE)
+    assert abs(median / ALPHA_TRUE - 1.0) <= CLI_ALPHA_RELATIVE
