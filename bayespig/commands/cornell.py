@@ -1,0 +1,101 @@
+"""``bayespig cornell``: the Cornell gonio paints (rough-surface fits, subset consistency, report)."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+from ._arguments import add_output_argument, add_verbosity_arguments
+
+__all__ = ["CORNELL_SOURCE", "add_cornell_parser", "cornell_folder", "run_cornell"]
+
+#: Where the Cornell data come from, for the message when they are not found.
+CORNELL_SOURCE = ("the Cornell Program of Computer Graphics gonioreflectometer measurements garnet_red.astm and "
+                  "krylon_blue.astm (ASTM E1392), redistributed in github.com/chicio/Spectral-Clara-Lux-Tracer "
+                  "(Scenes/BRDFs)")
+
+
+def add_cornell_parser(subparsers):
+    """Register ``bayespig cornell``."""
+    parser = subparsers.add_parser(
+        "cornell",
+        help="real gonio paints: rough-surface fits, subset consistency, smooth-model comparison",
+        description="Fit the two Cornell gonio paints (garnet red, Krylon blue) as opaque films under a "
+        "rough surface (roughness and a noise floor inferred), check that geometry subsets agree, compare "
+        "with the smooth surface, and write the report (reports/cornell.md and reports/cornell/*.png). "
+        "Takes about 10 min on 2 shared cores.",
+    )
+    parser.add_argument("path", nargs="?", default=None,
+                        help="folder of the Cornell data (default $BAYESPIG_CORNELL, else ../shared/data/cornell "
+                        "from the working folder)")
+    add_output_argument(parser, "--report", kind="file", default="reports/cornell.md",
+                        help="Markdown report to write (default reports/cornell.md; figures beside it)")
+    parser.add_argument("--subset-bands", type=float, nargs="*", default=None, metavar="NM",
+                        help="bands of the subset-consistency fits [nm] (default all 31)")
+    parser.add_argument("--full-bands", type=float, nargs="*", default=None, metavar="NM",
+                        help="bands of the full fit [nm] (default all 31)")
+    parser.add_argument("--max-steps", type=int, default=None,
+                        help="cap of every run's steps per walker (default 2000)")
+    parser.add_argument("--draws-per-chain", type=int, default=None,
+                        help="stored draws per chain (default 256)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of every fit (default 0)")
+    add_verbosity_arguments(parser)
+    parser.set_defaults(func=run_cornell)
+    return parser
+
+
+def cornell_folder(path=None):
+    """The folder of the Cornell data: ``path``, else ``$BAYESPIG_CORNELL``, else the default.
+
+    Raises
+    ------
+    MeasurementError
+        When it does not exist: where it was looked for, where the data come from and how to
+        point at them.
+    """
+    from ..data.errors import MeasurementError, Problem
+    from ..studies.cornell import default_cornell_path
+
+    folder = Path(path) if path is not None else default_cornell_path()
+    if folder.exists():
+        return folder
+    if path is not None:
+        where = "the folder given"
+    elif os.environ.get("BAYESPIG_CORNELL"):
+        where = "from $BAYESPIG_CORNELL"
+    else:
+        where = "the default, ../shared/data/cornell from the working folder"
+    raise MeasurementError(Problem(f"file not found ({where}). The Cornell data are {CORNELL_SOURCE}; give "
+                                   "their folder as 'bayespig cornell FOLDER' or set BAYESPIG_CORNELL=FOLDER",
+                                   file=str(folder)))
+
+
+def run_cornell(args):
+    """Run the study and write the report; returns the exit code."""
+    import dataclasses
+
+    from ..studies.cornell import CornellStudySettings, cornell_study, write_cornell_report
+
+    for name in ("max_steps", "draws_per_chain"):
+        value = getattr(args, name)
+        if value is not None and value < 1:
+            raise ValueError(f"--{name.replace('_', '-')} must be a positive integer, got {value}")
+    settings = CornellStudySettings(seed=args.seed)
+    overrides = {k: v for k, v in (("max_steps", args.max_steps), ("draws_per_chain", args.draws_per_chain))
+                 if v is not None}
+    if overrides:
+        settings = dataclasses.replace(settings, inference=dataclasses.replace(settings.inference, **overrides))
+    if args.subset_bands is not None:
+        settings = dataclasses.replace(settings, subset_bands=tuple(args.subset_bands))
+    if args.full_bands is not None:
+        settings = dataclasses.replace(settings, full_bands=tuple(args.full_bands))
+    folder = cornell_folder(args.path)
+    progress = None if args.no_progress else (lambda message: print(message, file=sys.stderr, flush=True))
+    study = cornell_study(folder, settings=settings, progress=progress)
+    path = write_cornell_report(study, args.report)
+    print(f"wrote {path}: " + "; ".join(
+        f"{paint} roughness {result['full']['roughness'][1]:.4f}, subset overlap at "
+        f"{int(result['overlap'].sum())} of {result['overlap'].size} bands"
+        for paint, result in study["paints"].items()))
+    return 0

@@ -1,0 +1,114 @@
+"""The Cornell study (bayespig.studies.cornell): subset logic, a tiny run, the report's structure."""
+
+import argparse
+import re
+
+import numpy as np
+import pytest
+
+from bayespig.commands.cornell import add_cornell_parser, cornell_folder
+from bayespig.data import MeasurementError, read_measurements
+from bayespig.inference import InferenceSettings
+from bayespig.selection import mirror_distance_deg, select_measurements
+from bayespig.studies.cornell import (
+    MIRROR_CUT_DEG,
+    SUBSET_MAX_ANGLE_DEG,
+    SUBSET_SPLIT_DEG,
+    CornellStudySettings,
+    cornell_study,
+    default_cornell_path,
+    interval_overlap,
+    mirror_band_subset,
+    write_cornell_report,
+)
+
+CORNELL = default_cornell_path()
+needs_cornell = pytest.mark.skipif(not (CORNELL / "garnet_red.astm").exists(),
+                                   reason=f"Cornell data not found at {CORNELL} (set BAYESPIG_CORNELL)")
+#: The tiny run: one incidence (about 10 distinct viewing angles for the rough table), two
+#: bands, short chains: it checks the study's plumbing and report, not its numbers.
+TINY = CornellStudySettings(
+    full_bands=(450.0, 650.0), subset_bands=(450.0, 650.0), smooth_bands=(650.0,), incidences_deg=(30.0,),
+    max_geometries=60,
+    inference=InferenceSettings(n_walkers=16, n_ensembles=2, draws_per_chain=32, target_ess=10, min_steps=50,
+                                max_steps=80, check_interval=40))
+
+
+def test_interval_overlap_on_constructed_intervals():
+    first = np.array([[0.10, 0.10, 0.10, 0.50, 0.30],
+                      [0.20, 0.20, 0.20, 0.60, 0.40]])
+    second = np.array([[0.15, 0.20, 0.21, 0.10, 0.32],
+                       [0.30, 0.30, 0.30, 0.49, 0.35]])
+    # partial overlap, touching ends, disjoint above, disjoint below, one inside the other
+    assert interval_overlap(first, second).tolist() == [True, True, False, False, True]
+    assert interval_overlap(second, first).tolist() == [True, True, False, False, True]
+
+
+def test_interval_overlap_refuses_mismatched_shapes():
+    with pytest.raises(ValueError, match=r"first and second must both have shape \(2, n_bands\), "
+                                         r"got \(2, 3\) and \(2, 2\)"):
+        interval_overlap(np.zeros((2, 3)), np.zeros((2, 2)))
+
+
+def test_missing_folder_is_one_plain_error(tmp_path):
+    missing = tmp_path / "nowhere"
+    with pytest.raises(MeasurementError, match=r"file not found \(the folder given\)\. The Cornell data are"):
+        cornell_folder(missing)
+
+
+def test_cli_registers_cornell():
+    parser = argparse.ArgumentParser()
+    add_cornell_parser(parser.add_subparsers())
+    args = parser.parse_args(["cornell", "--subset-bands", "450", "650", "--max-steps", "100"])
+    assert args.subset_bands == [450.0, 650.0] and args.max_steps == 100 and args.report == "reports/cornell.md"
+
+
+@needs_cornell
+def test_subsets_split_the_geometries_by_mirror_distance():
+    measurements = read_measurements(CORNELL / "garnet_red.astm", opaque=True)
+    far = select_measurements(measurements, exclude_mirror_deg=SUBSET_SPLIT_DEG, max_angle_deg=SUBSET_MAX_ANGLE_DEG)
+    near = mirror_band_subset(measurements, MIRROR_CUT_DEG, SUBSET_SPLIT_DEG, SUBSET_MAX_ANGLE_DEG)
+
+    def distances(m):
+        return np.array([mirror_distance_deg(x.theta_i, x.theta_o, x.delta_phi) for x in m.films[0].measurements])
+
+    assert np.all(distances(far) > SUBSET_SPLIT_DEG)
+    assert np.all((distances(near) > MIRROR_CUT_DEG) & (distances(near) <= SUBSET_SPLIT_DEG))
+    every = [x for x in measurements.films[0].measurements
+             if max(x.theta_i, x.theta_o) <= SUBSET_MAX_ANGLE_DEG
+             and mirror_distance_deg(x.theta_i, x.theta_o, x.delta_phi) > MIRROR_CUT_DEG]
+    assert len(far.films[0].measurements) + len(near.films[0].measurements) == len(every)
+
+
+@pytest.fixture(scope="module")
+def tiny_study():
+    if not (CORNELL / "garnet_red.astm").exists():
+        pytest.skip(f"Cornell data not found at {CORNELL} (set BAYESPIG_CORNELL)")
+    return cornell_study(CORNELL, settings=TINY, paints=["garnet_red"])
+
+
+def test_tiny_study_report_structure(tiny_study, tmp_path):
+    result = tiny_study["paints"]["garnet_red"]
+    assert result["full"]["wavelength_nm"].tolist() == [450.0, 650.0]
+    assert result["smooth"]["roughness"] is None  # roughness 0: no roughness parameter
+    assert 0.01 <= result["full"]["roughness"][1] <= 1.0
+    expected = interval_overlap(result["far"]["a"][[0, 2]], result["near"]["a"][[0, 2]])
+    assert result["overlap"].tolist() == expected.tolist()
+
+    path = write_cornell_report(tiny_study, tmp_path / "cornell.md")
+    text = path.read_text()
+    assert text.splitlines()[0] == "# Cornell gonio paints: rough-surface fits (issue 16)"
+    assert "    bayespig cornell" in text
+    for heading in ("## Summary of the goals", "### Goals", "### Subset consistency", "### Prior-edge flags",
+                    "### Smooth surface (roughness 0) for comparison"):
+        assert heading in text
+    for figure in re.findall(r"!\[[^]]*\]\(([^)]+)\)", text):
+        assert (tmp_path / figure).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert {p.name for p in (tmp_path / "cornell").iterdir()} == {
+        "garnet_red_a.png", "garnet_red_plane.png", "garnet_red_residual_map.png"}
+    # the subset table says "yes" exactly where the recomputed intervals overlap
+    table = text.split("### Subset consistency")[1].split("###")[0]
+    said = [cells.split("|")[4].strip() == "yes" for cells in table.splitlines() if re.match(r"\| \d", cells)]
+    assert said == expected.tolist()
+    n = int(expected.sum())
+    assert f"({n} of 2 bands" in text
