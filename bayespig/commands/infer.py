@@ -61,8 +61,7 @@ def add_infer_parser(subparsers):
                              "(default: none, eq. 7 alone)")
     parser.add_argument("--roughness", default=None, metavar="free|NUMBER",
                         help="GGX roughness alpha of the films' top surface: 'free' (inferred, shared by all "
-                             "wavelengths) or a number (fixed; 0 = smooth). Default: free for a set of opaque "
-                             "films with BRDF channels, else 0")
+                             "wavelengths) or a number (fixed; 0 = smooth, the default)")
     parser.add_argument("--exclude-mirror", type=float, default=None, metavar="DEG",
                         help="drop the films' geometries within DEG degrees of the mirror direction")
     parser.add_argument("--max-angle", type=float, default=None, metavar="DEG",

@@ -64,8 +64,7 @@ def rough_set():
 
 @pytest.fixture(scope="module")
 def rough_idata(rough_set):
-    # roughness="free" is the default for a set of opaque films with BRDF channels
-    return infer(rough_set, eps=EPS_TRUE, settings=FAST, progress=False)
+    return infer(rough_set, eps=EPS_TRUE, settings=FAST, progress=False, roughness="free")
 
 
 def _interval(values):
@@ -175,7 +174,7 @@ def test_free_roughness_with_an_inferred_noise_floor_takes_zeros_as_data(rough_s
     measurements = MeasurementSet(rough_set.wavelength_nm, [zeroed], n=rough_set.n, metadata={},
                                   source=rough_set.source)
     idata = infer(measurements, eps=EPS_TRUE, noise_floor="infer", settings=FAST, progress=False,
-                  wavelengths=[450.0, 550.0, 650.0])
+                  wavelengths=[450.0, 550.0, 650.0], roughness="free")
     assert idata.posterior["noise_floor"].dims == ("chain", "draw", "wavelength")
     assert idata.posterior.attrs["noise_floor_mode"] == "inferred"
     low, high = _interval(idata.posterior["roughness"].values.reshape(-1))
