@@ -179,7 +179,7 @@ def model_reflectance(library, concentrations, constants, thickness, *, instrume
                              "in air, one value per wavelength); or pass thickness='opaque'")
         substrate = np.zeros(library.wavelength_nm.size)
     return model.reflectance(constants[:, :, present], D[present], thickness, substrate=substrate,
-                             instrument=instrument, n=library.n)
+                             instrument=instrument, n=getattr(library, "n", 1.45))
 
 
 def predict_paint(library, recipe, *, thickness, instrument, substrate=None, seed=0, n_draws=DEFAULT_DRAWS,
