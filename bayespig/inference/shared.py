@@ -741,6 +741,11 @@ def sample_blocks(model, specs, draws, settings, joint_seed, start_seed, priors=
     spread = np.concatenate([np.asarray(s.start_sd, dtype=float) for s in joint.specs])
     start = np.concatenate([residual, rng.normal(joint.shared_nominal, spread, (n_total, joint.n_shared))], axis=1)
     start[:, joint.shared_slice] = np.clip(start[:, joint.shared_slice], joint.shared_lower, joint.shared_upper)
+    # a start whose shift S (phi - phi_0) takes a block out of its box (a block near its
+    # box's edge, e.g. a white's a ~ 1e-4) starts at its picked physical point instead
+    outside = ~joint.in_support(start)
+    if outside.any():
+        start[outside] = joint.u_of(joint._flat(picked[outside]), start[outside][:, joint.shared_slice])
     adapt_seed, joint_seed = joint_seed.spawn(2)
 
     def run_joint(posterior, run_settings, seed, walkers):
