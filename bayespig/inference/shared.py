@@ -11,14 +11,24 @@ first spec.
 
 The joint posterior
 -------------------
-Parameters ``[a_λ (n_wl), log tau_λ,group (n_wl * G), phi (n_shared)]``: per wavelength the
-block ``theta_λ = [a, log tau_1..G]`` with the box priors of :class:`bayespig.likelihood.Priors`,
-and ``phi`` the concatenated sampled coordinates of the specs (e.g. ``log f`` per card), each
-spec with its own prior and box. The likelihood is eq. (7) with a known relative error ``eps``
-at every wavelength, the forward model evaluated with the specs' inputs (:meth:`SharedParameter.model_inputs`).
+Parameters ``[theta_λ (k per wavelength), phi (n_shared)]``: per wavelength a block
+``theta_λ`` of ``k`` coordinates with a flat prior on a box, and ``phi`` the concatenated
+sampled coordinates of the specs (e.g. ``log f`` per card), each spec with its own prior and
+box. The likelihood is eq. (7) with a known relative error ``eps`` of every value, the forward
+model evaluated with the specs' inputs (:meth:`SharedParameter.model_inputs`).
+
+What a block holds is a *layout* (:class:`BlockLayout`: ``k``, the coordinates' names and
+box, their place in the flat vector, the measured values, ``eps`` and
+``predict(theta (W, n_wl, k), inputs) -> (W, n_wl, n_values)``). :class:`FilmLayout` is one
+film problem, ``theta_λ = [a, log tau_1..G]`` (its film groups) with the box priors of
+:class:`bayespig.likelihood.Priors` and the per-wavelength model
+:class:`bayespig.likelihood.WavelengthModel` (a :class:`~bayespig.likelihood.ForwardModel`
+passed to :class:`JointLogPosterior` is this layout); a pigment library's layout holds the
+constants of the pigments being fitted (:mod:`bayespig.library.build`). The residual
+coordinates, the moves, the start and the run below do not depend on the layout.
 
 Residual coordinates
-    Sampled are ``u = [r (n_wl * (1 + G)), phi]`` with ``theta = theta_hat + r + S (phi - phi_0)``:
+    Sampled are ``u = [r (n_wl * k), phi]`` with ``theta = theta_hat + r + S (phi - phi_0)``:
     ``theta_hat`` and ``S`` are the intercept and slope of the linear regression of ``theta``
     on ``phi`` over the draws of a short joint run (the adaptation, below), so that ``r`` is
     uncorrelated with ``phi``; that run itself uses the per-wavelength posterior median at the
@@ -39,10 +49,11 @@ Block-wise moves
     the shared block on the whole log-posterior; a share :data:`JOINT_DE_WEIGHT` of
     whole-vector DE moves follows the correlations the residual coordinates leave.
 Pilot start, adaptation
-    :func:`sample_joint` takes a per-wavelength run at ``phi = phi_0`` (the usual
-    :func:`bayespig.inference.infer_problem`), uses its medians as ``theta_hat``, and starts the
-    walkers on its draws (picked independently per wavelength) with ``phi`` in a small ball
-    around ``phi_0``. A joint run of :data:`ADAPTATION_STEPS` steps from there gives the
+    :func:`sample_blocks` takes start draws of every block at ``phi = phi_0`` (for a film,
+    :func:`sample_joint`: a per-wavelength run, the usual
+    :func:`bayespig.inference.infer_problem`; for a library, a ball around a point fit), uses
+    their medians as ``theta_hat``, and starts the walkers on them (picked independently per
+    wavelength) with ``phi`` in a small ball around ``phi_0``. A joint run of :data:`ADAPTATION_STEPS` steps from there gives the
     regression's ``theta_hat`` and ``S``; the run proper starts on its last walkers (the same
     physical points in the new coordinates). Any fixed ``S`` leaves the target invariant; the
     adaptation's draws are not kept.
@@ -77,15 +88,12 @@ Binder index ``n`` (issue 16)
     :func:`bayespig.physics.substrate.substrate_albedo_from_air`) through an ``n`` keyword of the
     per-wavelength model (tables with an ``n`` axis).
 Film thickness (issue 17)
-    One coordinate ``log h`` per film, prior normal around a measured thickness (or flat when
-    none), physical value ``h``; it enters through a ``tau_scale`` keyword per film of the
-    per-wavelength model (``tau_film(λ) = h_film * tau_per_thickness(λ)``), so that the
-    per-wavelength block holds the optical thickness per unit film thickness. For a pigment
-    library the block becomes the pigments' constants (``a_i``, ``k_i`` per wavelength, films
-    mixed by their recipes): the block layout (``[a, log tau_1..G]`` per wavelength in
-    :class:`JointLogPosterior` today) is then the one part to generalise; the residual
-    coordinates, the moves and the pilot start do not depend on what a block holds. One
-    thickness is fixed (or has an informative prior) so that ``h * k`` stays identifiable.
+    :class:`bayespig.inference.film_thickness.FilmThickness`: one coordinate ``log h`` per
+    film, prior normal around log of a measured thickness, else around 0 (relative
+    thickness) with a stated sd, truncated; it enters through the model input ``thickness``
+    (one per film) of the pigment library's layout (:mod:`bayespig.library.build`), whose
+    block holds the pigments' constants (``a_i``, ``log sigma_i`` per wavelength, films mixed
+    by their recipes). The prior keeps ``h * sigma`` identifiable.
 
 Several specs at once (card factors and roughness) concatenate their coordinates in ``phi``
 and are moved together in the shared block.
@@ -111,10 +119,13 @@ __all__ = [
     "ADAPTATION_STEPS",
     "JOINT_DE_WEIGHT",
     "SENSITIVITY_DAMPING",
+    "BlockLayout",
     "BlockwiseMove",
+    "FilmLayout",
     "JointLogPosterior",
     "SharedParameter",
     "pilot_draws",
+    "sample_blocks",
     "sample_joint",
 ]
 
@@ -188,67 +199,204 @@ class SharedParameter(abc.ABC):
         """The prior and the labels as a JSON-able dict (provenance)."""
 
 
+class BlockLayout(abc.ABC):
+    """What one wavelength's block of a :class:`JointLogPosterior` holds (see the module docstring).
+
+    A layout says how many coordinates ``k`` each wavelength has, their box, where they sit in
+    the flat vector of all blocks, the measured values and their relative error, and how the
+    values follow from every wavelength's block and the specs' model inputs. Subclasses set
+    the attributes and implement :meth:`predict`; everything else of the joint machinery
+    (residual coordinates, moves, pilot start, run length) is the same for every layout.
+
+    Attributes
+    ----------
+    wavelength_nm : numpy.ndarray
+        Shape (n_wavelengths,) [nm].
+    names : tuple of str
+        Name of each of the ``k`` coordinates of a block (e.g. ``("a", "log_tau")``).
+    lower, upper : numpy.ndarray
+        Box of every block's coordinates (the prior's support; flat prior), (n_wavelengths, k).
+    observed : numpy.ndarray
+        Measured values, (n_wavelengths, n_values).
+    eps : numpy.ndarray
+        Known relative error of every value, broadcastable to ``observed``.
+    flat_index : numpy.ndarray of int
+        Position of every block coordinate in the flat vector ``theta`` (n_wavelengths, k);
+        default coordinate-major (``j * n_wavelengths + i``).
+    parameter_names : tuple of str
+        Names of the flat residual coordinates (default ``r_<name>[<wavelength>]``).
+    """
+
+    @property
+    def n_wavelengths(self):
+        """Number of wavelengths (blocks)."""
+        return len(self.wavelength_nm)
+
+    @property
+    def size(self):
+        """Coordinates per block ``k``."""
+        return len(self.names)
+
+    @property
+    def flat_index(self):
+        """Coordinate-major positions, (n_wavelengths, k)."""
+        return np.arange(self.size)[None, :] * self.n_wavelengths + np.arange(self.n_wavelengths)[:, None]
+
+    @property
+    def parameter_names(self):
+        """``r_<name>[<wavelength>]`` in flat order."""
+        names = np.empty(self.n_wavelengths * self.size, dtype=object)
+        for i, w in enumerate(self.wavelength_nm):
+            for j, name in enumerate(self.names):
+                names[self.flat_index[i, j]] = f"r_{name}[{w:g}]"
+        return tuple(names)
+
+    def centre(self):
+        """A point inside every block's box, (n_wavelengths, k) (the box's middle by default)."""
+        return 0.5 * (np.asarray(self.lower, dtype=float) + np.asarray(self.upper, dtype=float))
+
+    @abc.abstractmethod
+    def predict(self, theta, inputs):
+        """Values of every wavelength, (W, n_wavelengths, n_values).
+
+        Parameters
+        ----------
+        theta : numpy.ndarray
+            Every wavelength's block, (W, n_wavelengths, k), inside the box.
+        inputs : dict
+            The specs' model inputs (:meth:`SharedParameter.model_inputs`), one row per walker.
+        """
+
+    def unpack(self, theta):
+        """Physical values of the blocks (W, n_wavelengths, k) for :meth:`JointLogPosterior.unpack`
+        (a tuple; default the blocks themselves)."""
+        return (theta,)
+
+
+class FilmLayout(BlockLayout):
+    """The block ``[a, log tau_1..G]`` per wavelength of one film problem (its film groups).
+
+    The flat order is ``[a (n_wl), log tau (n_wl * G)]``; the box that of
+    :class:`bayespig.likelihood.Priors`; the values those of the per-wavelength model
+    (:class:`bayespig.likelihood.WavelengthModel`) with the specs' keywords.
+
+    Parameters
+    ----------
+    model : ForwardModel
+        Isotropic.
+    priors : Priors
+    eps : float
+        Known relative error for films without their own [-].
+    """
+
+    names = ("a", "log_tau")
+
+    def __init__(self, model, priors, eps):
+        problem = model.problem
+        self.model = model
+        self.problem = problem
+        self.wavelength_nm = np.asarray(problem.wavelength_nm, dtype=float)
+        self.n_groups = G = len(problem.groups)
+        self.names = ("a",) + (("log_tau",) if G == 1 else tuple(f"log_tau[{g}]" for g in problem.groups))
+        n_wl = self.n_wavelengths
+        self.evaluate = model.at_wavelength(list(range(n_wl)))
+        self.observed = np.stack([problem.observed(i) for i in range(n_wl)])
+        self.eps = problem.known_eps(eps)
+        self.lower = np.tile(np.concatenate([[priors.a_range[0]], np.full(G, np.log(priors.tau_range[0]))]),
+                             (n_wl, 1))
+        self.upper = np.tile(np.concatenate([[priors.a_range[1]], np.full(G, np.log(priors.tau_range[1]))]),
+                             (n_wl, 1))
+
+    @property
+    def flat_index(self):
+        """``[a (n_wl), log tau (n_wl * G)]``: a wavelength's ``a`` at ``i``, its ``log tau_g`` at
+        ``n_wl + i * G + g``."""
+        n_wl, G = self.n_wavelengths, self.n_groups
+        return np.concatenate([np.arange(n_wl)[:, None], n_wl + np.arange(n_wl * G).reshape(n_wl, G)], axis=1)
+
+    @property
+    def parameter_names(self):
+        """``r_a[w]`` then ``r_log_tau[w,group]``."""
+        wl = [f"{w:g}" for w in self.wavelength_nm]
+        return tuple([f"r_a[{w}]" for w in wl] + [f"r_log_tau[{w},{g}]" for w in wl for g in self.problem.groups])
+
+    def predict(self, theta, inputs):
+        """The film problem's values from ``[a, log tau]`` per wavelength, (W, n_wl, n_values)."""
+        W, n_wl = theta.shape[:2]
+        member = np.tile(np.arange(n_wl), W)
+        rows = {key: np.repeat(value, n_wl, axis=0) for key, value in inputs.items()}
+        values = self.evaluate(theta[..., 0].reshape(-1), np.exp(theta[..., 1:]).reshape(W * n_wl, -1), None,
+                               member=member, **rows)
+        return values.reshape(W, n_wl, -1)
+
+    def unpack(self, theta):
+        """``a`` (W, n_wl) and ``tau`` (W, n_wl, G)."""
+        return theta[..., 0], np.exp(theta[..., 1:])
+
+
 class JointLogPosterior:
     """Joint log-posterior over all wavelengths with parameters shared by them.
 
-    Sampled in the residual coordinates of the module docstring,
-    ``u = [r_a (n_wl), r_log_tau (n_wl * G), phi (n_shared)]``. The interface of
+    Sampled in the residual coordinates of the module docstring, ``u = [r (n_wl * k), phi
+    (n_shared)]`` with ``r`` in the layout's flat order (for a film,
+    ``[r_a (n_wl), r_log_tau (n_wl * G)]``). The interface of
     :class:`bayespig.likelihood.LogPosterior` (``n_dim``, ``parameter_names``,
     ``in_support``, call on ``u`` of shape (W, n_dim)), so that the sampler of the
     per-wavelength runs runs it with its run-length rule and diagnostics.
 
     Parameters
     ----------
-    model : ForwardModel
-        Isotropic.
+    model : ForwardModel or BlockLayout
+        A ForwardModel (isotropic) is the film layout :class:`FilmLayout` with ``priors`` and
+        ``eps``; any other block content comes as its :class:`BlockLayout`.
     theta_hat : numpy.ndarray
-        Centre per wavelength ``[a, log tau_1..G]``, shape (n_wavelengths, 1 + G) (the pilot's
-        medians, :func:`pilot_draws`).
+        Centre of every block, shape (n_wavelengths, k) (for a film ``[a, log tau_1..G]``: the
+        pilot's medians, :func:`pilot_draws`).
     specs : sequence of SharedParameter
     priors : Priors, optional
-        Ranges of ``a`` and ``tau`` (default :class:`~bayespig.likelihood.Priors`).
+        Ranges of ``a`` and ``tau`` of a film layout (default :class:`~bayespig.likelihood.Priors`).
     eps : float
-        Known relative measurement error of eq. (7) for films without their own [-].
+        Known relative measurement error of eq. (7) for films without their own [-] (film
+        layout; a :class:`BlockLayout` carries its own).
     sensitivity : numpy.ndarray, optional
-        ``S`` of the residual coordinates, shape (n_wavelengths * (1 + G), n_shared) in the
-        order ``[a (n_wl), log tau (n_wl * G)]``; default the damped Gauss-Newton one
-        (:meth:`_sensitivity`).
+        ``S`` of the residual coordinates, shape (n_wavelengths * k, n_shared) in the flat
+        order; default the damped Gauss-Newton one (:meth:`_sensitivity`).
     """
 
     def __init__(self, model, theta_hat, specs, priors=None, eps=0.01, sensitivity=None):
         priors = Priors() if priors is None else priors
         specs = tuple(specs)
-        if model.g != "isotropic":
+        if not isinstance(model, BlockLayout) and model.g != "isotropic":
             raise ValueError(f"{' and '.join(s.title for s in specs) or 'shared parameters'} are "
                              "implemented for isotropic scattering (g fixed at 0)")
         if not (np.isfinite(eps) and eps > 0):
             raise ValueError(f"eps must be a positive number, got {eps!r}")
         if not specs or any(not isinstance(s, SharedParameter) for s in specs):
             raise TypeError("specs must be a non-empty sequence of SharedParameter")
-        problem = model.problem
-        self.model = model
+        layout = model if isinstance(model, BlockLayout) else FilmLayout(model, priors, eps)
+        self.layout = layout
+        self.model = getattr(layout, "model", None)
         self.specs = specs
         self.priors = priors
-        self.n_wavelengths = n_wl = problem.n_wavelengths
-        self.n_groups = G = len(problem.groups)
-        self.evaluate = model.at_wavelength(list(range(n_wl)))
-        self.observed = np.stack([problem.observed(i) for i in range(n_wl)])
-        self.eps = problem.known_eps(eps)
+        self.n_wavelengths = n_wl = layout.n_wavelengths
+        self.block_size = k = layout.size
+        self.n_groups = getattr(layout, "n_groups", None)
+        self.observed = np.asarray(layout.observed, dtype=float)
+        self.eps = layout.eps
         self.n_shared = sum(s.size for s in specs)
         self.shared_lower = np.concatenate([np.asarray(s.lower, dtype=float) for s in specs])
         self.shared_upper = np.concatenate([np.asarray(s.upper, dtype=float) for s in specs])
         self.shared_nominal = np.concatenate([np.asarray(s.nominal, dtype=float) for s in specs])
-        self.theta_lower = np.concatenate([np.full(n_wl, priors.a_range[0]),
-                                           np.full(n_wl * G, np.log(priors.tau_range[0]))])
-        self.theta_upper = np.concatenate([np.full(n_wl, priors.a_range[1]),
-                                           np.full(n_wl * G, np.log(priors.tau_range[1]))])
-        theta_hat = np.asarray(theta_hat, dtype=float).reshape(n_wl, 1 + G)
-        self.theta_hat = np.concatenate([theta_hat[:, 0], theta_hat[:, 1:].reshape(-1)])
-        self.theta_hat = np.clip(self.theta_hat, self.theta_lower, self.theta_upper)
-        n_theta = n_wl * (1 + G)
-        #: Coordinates of each wavelength's block in ``u`` (n_wl, 1 + G), and of the shared block.
-        self.blocks = np.concatenate([np.arange(n_wl)[:, None],
-                                      n_wl + np.arange(n_wl * G).reshape(n_wl, G)], axis=1)
+        n_theta = n_wl * k
+        #: Coordinates of each wavelength's block in ``u`` (n_wl, k), and of the shared block.
+        self.blocks = np.asarray(layout.flat_index, dtype=int)
+        if self.blocks.shape != (n_wl, k) or not np.array_equal(np.sort(self.blocks.ravel()), np.arange(n_theta)):
+            raise ValueError(f"the layout's flat_index must be a permutation of 0..{n_theta - 1} in shape "
+                             f"{(n_wl, k)}, got shape {self.blocks.shape}")
+        self.theta_lower = self._flat(np.broadcast_to(np.asarray(layout.lower, dtype=float), (n_wl, k)))
+        self.theta_upper = self._flat(np.broadcast_to(np.asarray(layout.upper, dtype=float), (n_wl, k)))
+        theta_hat = np.asarray(theta_hat, dtype=float).reshape(n_wl, k)
+        self.theta_hat = np.clip(self._flat(theta_hat), self.theta_lower, self.theta_upper)
         self.shared_slice = slice(n_theta, n_theta + self.n_shared)
         #: Each spec's coordinates within ``phi``.
         self.spec_slices = []
@@ -257,7 +405,7 @@ class JointLogPosterior:
             self.spec_slices.append(slice(start, start + spec.size))
             start += spec.size
         if sensitivity is None:
-            self.sensitivity = self._sensitivity()  # (n_wl * (1 + G), n_shared)
+            self.sensitivity = self._sensitivity()  # (n_wl * k, n_shared)
         else:
             self.sensitivity = np.asarray(sensitivity, dtype=float)
             if self.sensitivity.shape != (n_theta, self.n_shared):
@@ -268,18 +416,26 @@ class JointLogPosterior:
                                                       np.abs(self.shared_upper - self.shared_nominal))
         self.lower = np.concatenate([self.theta_lower - self.theta_hat - reach, self.shared_lower])
         self.upper = np.concatenate([self.theta_upper - self.theta_hat + reach, self.shared_upper])
-        wl = [f"{w:g}" for w in problem.wavelength_nm]
-        self.parameter_names = tuple([f"r_a[{w}]" for w in wl]
-                                     + [f"r_log_tau[{w},{g}]" for w in wl for g in problem.groups]
-                                     + [f"{s.coordinate_name}[{label}]" for s in specs for label in s.labels])
+        self.parameter_names = tuple(layout.parameter_names) + tuple(
+            f"{s.coordinate_name}[{label}]" for s in specs for label in s.labels)
 
     @property
     def n_dim(self):
         """Number of parameters."""
-        return self.n_wavelengths * (1 + self.n_groups) + self.n_shared
+        return self.n_wavelengths * self.block_size + self.n_shared
+
+    def _flat(self, blocks):
+        """The flat vector(s) of blocks (..., n_wl, k) in the layout's order, (..., n_wl * k)."""
+        flat = np.empty(blocks.shape[:-2] + (self.blocks.size,))
+        flat[..., self.blocks] = blocks
+        return flat
+
+    def blocks_of(self, theta):
+        """Every wavelength's block (W, n_wl, k) from flat ``theta`` (W, n_wl * k)."""
+        return theta[:, self.blocks]
 
     def _model_inputs(self, phi):
-        """The specs' keyword arrays of the per-wavelength model, one row per row of ``phi``."""
+        """The specs' keyword arrays of the forward model, one row per row of ``phi``."""
         inputs = {}
         for spec, part in zip(self.specs, self.spec_slices):
             for key, value in spec.model_inputs(phi[:, part]).items():
@@ -289,15 +445,8 @@ class JointLogPosterior:
         return inputs
 
     def _predict_theta(self, theta, phi):
-        """Values of every wavelength, (W, n_wl, n_values), from physical ``theta`` and ``phi``."""
-        n_wl, G = self.n_wavelengths, self.n_groups
-        W = theta.shape[0]
-        a = theta[:, :n_wl]
-        tau = np.exp(theta[:, n_wl:]).reshape(W, n_wl, G)
-        member = np.tile(np.arange(n_wl), W)
-        inputs = {key: np.repeat(value, n_wl, axis=0) for key, value in self._model_inputs(phi).items()}
-        values = self.evaluate(a.reshape(-1), tau.reshape(W * n_wl, G), None, member=member, **inputs)
-        return values.reshape(W, n_wl, -1)
+        """Values of every wavelength, (W, n_wl, n_values), from physical flat ``theta`` and ``phi``."""
+        return self.layout.predict(self.blocks_of(theta), self._model_inputs(phi))
 
     def _sensitivity(self, step=1e-4):
         """``d theta_hat / d phi`` per wavelength by Gauss-Newton on the weighted residuals.
@@ -307,7 +456,7 @@ class JointLogPosterior:
         :data:`SENSITIVITY_DAMPING`; directions the data do not constrain (e.g. ``tau`` of a
         film that hides its card) get no shift.
         """
-        n_wl, G, C = self.n_wavelengths, self.n_groups, self.n_shared
+        n_wl, C = self.n_wavelengths, self.n_shared
         base = np.concatenate([self.theta_hat, self.shared_nominal])
         inner = np.clip(base[:-C], self.theta_lower + step, self.theta_upper - step)
         base[:-C] = inner
@@ -318,10 +467,10 @@ class JointLogPosterior:
             residual = (self.observed / values - 1.0) / self.eps
         derivative = (residual[:base.size] - residual[base.size:]) / (2.0 * step)  # (n_dim, n_wl, n_values)
         derivative = np.nan_to_num(derivative, nan=0.0, posinf=0.0, neginf=0.0)
-        out = np.zeros((n_wl * (1 + G), C))
+        out = np.zeros((n_wl * self.block_size, C))
         for i in range(n_wl):
-            rows = np.concatenate([[i], n_wl + i * G + np.arange(G)])
-            J_theta = derivative[rows, i].T  # (n_values, 1 + G)
+            rows = self.blocks[i]
+            J_theta = derivative[rows, i].T  # (n_values, k)
             J_phi = derivative[-C:, i].T  # (n_values, C)
             normal = J_theta.T @ J_theta
             damping = SENSITIVITY_DAMPING * np.trace(normal) / normal.shape[0] + 1e-300
@@ -329,13 +478,13 @@ class JointLogPosterior:
         return out
 
     def theta_of(self, u):
-        """Physical ``[a (n_wl), log tau (n_wl * G)]`` and the shared coordinates ``phi`` from ``u``."""
+        """Physical flat ``theta`` (n_wl * k) and the shared coordinates ``phi`` from ``u``."""
         u = np.atleast_2d(u)
         phi = u[:, self.shared_slice]
         return self.theta_hat + u[:, :self.shared_slice.start] + (phi - self.shared_nominal) @ self.sensitivity.T, phi
 
     def u_of(self, theta, phi):
-        """The inverse of :meth:`theta_of`: ``u`` from ``theta`` (W, n_wl * (1 + G)) and ``phi`` (W, n_shared)."""
+        """The inverse of :meth:`theta_of`: ``u`` from flat ``theta`` (W, n_wl * k) and ``phi`` (W, n_shared)."""
         theta, phi = np.atleast_2d(theta), np.atleast_2d(phi)
         return np.concatenate([theta - self.theta_hat - (phi - self.shared_nominal) @ self.sensitivity.T, phi],
                               axis=1)
@@ -349,8 +498,8 @@ class JointLogPosterior:
         Returns
         -------
         tuple
-            ``(theta_hat (n_wl, 1 + G), S (n_wl * (1 + G), n_shared))``, the arguments of a
-            new :class:`JointLogPosterior`.
+            ``(theta_hat (n_wl, k), S (n_wl * k, n_shared))``, the arguments of a new
+            :class:`JointLogPosterior`.
         """
         theta, phi = self.theta_of(u)
         shift = phi - self.shared_nominal
@@ -358,15 +507,14 @@ class JointLogPosterior:
         coef = np.linalg.lstsq(design, theta, rcond=None)[0]
         slope = coef[1:].T  # (n_theta, n_shared)
         centre = coef[0] - slope @ shift.mean(axis=0)
-        n_wl, G = self.n_wavelengths, self.n_groups
-        return np.concatenate([centre[:n_wl, None], centre[n_wl:].reshape(n_wl, G)], axis=1), slope
+        return centre[self.blocks], slope
 
     def unpack(self, u):
-        """``a`` (W, n_wl), ``tau`` (W, n_wl, G), then each spec's physical values (W, size)."""
+        """The layout's physical block values (for a film ``a`` (W, n_wl) and ``tau`` (W, n_wl, G)),
+        then each spec's physical values (W, size)."""
         theta, phi = self.theta_of(u)
-        n_wl = self.n_wavelengths
         physical = [spec.physical(phi[:, part]) for spec, part in zip(self.specs, self.spec_slices)]
-        return (theta[:, :n_wl], np.exp(theta[:, n_wl:]).reshape(-1, n_wl, self.n_groups), *physical)
+        return (*self.layout.unpack(self.blocks_of(theta)), *physical)
 
     def _shared_inside(self, phi):
         return ((phi >= self.shared_lower) & (phi <= self.shared_upper)).all(axis=1)
@@ -387,15 +535,14 @@ class JointLogPosterior:
             return multiplicative_normal_logpdf(self.observed, self.predict(u), self.eps)
 
     def wavelength_terms(self, u):
-        """Log-likelihood of each wavelength, (W, n_wl); ``-inf`` where its ``(a, tau)`` or
-        ``phi`` leave the prior's box."""
+        """Log-likelihood of each wavelength, (W, n_wl); ``-inf`` where its block or ``phi``
+        leave the prior's box."""
         u = np.atleast_2d(np.asarray(u, dtype=float))
         theta, phi = self.theta_of(u)
-        n_wl, G = self.n_wavelengths, self.n_groups
         inside = (theta >= self.theta_lower) & (theta <= self.theta_upper)
-        block_ok = inside[:, :n_wl] & inside[:, n_wl:].reshape(-1, n_wl, G).all(axis=2)
+        block_ok = inside[:, self.blocks].all(axis=2)
         block_ok &= self._shared_inside(phi)[:, None]
-        terms = np.full((u.shape[0], n_wl), -np.inf)
+        terms = np.full((u.shape[0], self.n_wavelengths), -np.inf)
         rows = block_ok.any(axis=1)
         if rows.any():
             safe = np.clip(theta[rows], self.theta_lower, self.theta_upper)
@@ -543,8 +690,88 @@ def pilot_draws(idata):
     return draws.reshape(-1, *draws.shape[2:])
 
 
+def sample_blocks(model, specs, draws, settings, joint_seed, start_seed, priors=None, eps=0.01):
+    """Joint run over all wavelengths of any block layout with the shared parameters ``specs``.
+
+    The machinery of the module docstring: residual coordinates centred on the medians of
+    ``draws``, walkers started on ``draws`` (picked independently per wavelength) with ``phi``
+    in a small ball around the specs' ``nominal``, an adaptation run of
+    :data:`ADAPTATION_STEPS` steps whose regression gives the centre and sensitivity of the run
+    proper, :class:`BlockwiseMove` mixed with whole-vector DE, and the run-length rule and
+    diagnostics of the per-wavelength runs on the thinned joint chain.
+
+    Parameters
+    ----------
+    model : ForwardModel or BlockLayout
+        What the blocks hold (a ForwardModel: the film layout, :class:`FilmLayout`).
+    specs : sequence of SharedParameter
+    draws : numpy.ndarray
+        Start points of the blocks, (n_points, n_wavelengths, k), inside the box (a pilot's
+        draws, :func:`pilot_draws`, or any ball around a point fit): their medians are the
+        first ``theta_hat``.
+    settings : InferenceSettings
+        Walkers are raised to what the blocks need (a few per dimension of the largest block).
+    joint_seed, start_seed : numpy.random.SeedSequence
+        Seed the sampler, and the walkers' start.
+    priors : Priors, optional
+    eps : float
+        Those of a film layout (:class:`JointLogPosterior`).
+
+    Returns
+    -------
+    tuple
+        ``(run, settings, joint)``: the run record of :func:`bayespig.inference.sampler._sample_stack`
+        (``theta``: the draws in ``u``, (chain, draw, n_dim); ``autocorr_time`` per coordinate
+        of ``u``; ``n_steps``, ``max_steps_reached``, ...), the settings used, and the
+        :class:`JointLogPosterior` of the run proper (its :meth:`~JointLogPosterior.unpack`
+        gives the physical values).
+    """
+    draws = np.asarray(draws, dtype=float)
+    theta_hat = np.median(draws, axis=0)
+    joint = JointLogPosterior(model, theta_hat, specs, priors, eps)
+    n_wl, k = joint.n_wavelengths, joint.block_size
+    # blocks of k (a wavelength) and n_shared parameters: DE needs a few walkers per dimension
+    n_walkers = max(settings.n_walkers, 4 * max(k, joint.n_shared), 6)
+    used = dataclasses.replace(settings, n_walkers=n_walkers + n_walkers % 2)
+    # walkers start on the draws (independently per wavelength) with phi ~ phi_0
+    rng = np.random.default_rng(start_seed)
+    n_total = used.n_ensembles * used.n_walkers
+    picked = draws[rng.integers(0, draws.shape[0], size=(n_total, n_wl)), np.arange(n_wl)]  # (n, wl, k)
+    residual = joint._flat(picked) - joint.theta_hat
+    spread = np.concatenate([np.asarray(s.start_sd, dtype=float) for s in joint.specs])
+    start = np.concatenate([residual, rng.normal(joint.shared_nominal, spread, (n_total, joint.n_shared))], axis=1)
+    start[:, joint.shared_slice] = np.clip(start[:, joint.shared_slice], joint.shared_lower, joint.shared_upper)
+    # a start whose shift S (phi - phi_0) takes a block out of its box (a block near its
+    # box's edge, e.g. a white's a ~ 1e-4) starts at its picked physical point instead
+    outside = ~joint.in_support(start)
+    if outside.any():
+        start[outside] = joint.u_of(joint._flat(picked[outside]), start[outside][:, joint.shared_slice])
+    adapt_seed, joint_seed = joint_seed.spawn(2)
+
+    def run_joint(posterior, run_settings, seed, walkers):
+        return _sample_stack(posterior, [posterior], np.zeros((1, posterior.n_dim)), run_settings, [seed],
+                             moves=[(BlockwiseMove(posterior, used.n_ensembles), 1.0 - JOINT_DE_WEIGHT),
+                                    (IndependentEnsemblesMove("de", used.n_ensembles), JOINT_DE_WEIGHT)],
+                             start_walkers=walkers, dense_check=True)[0]
+
+    # adaptation: a short run whose draws give the regression's centre and sensitivity
+    adapt_steps = max(ADAPTATION_STEPS, used.steps_kept)
+    adaptation = run_joint(joint, dataclasses.replace(used, min_steps=adapt_steps, max_steps=adapt_steps,
+                                                      check_interval=adapt_steps),
+                           adapt_seed, start)
+    adapted = adaptation["theta"].reshape(-1, joint.n_dim)
+    theta_hat, sensitivity = joint.regression(adapted)
+    last = adaptation["theta"].reshape(used.n_ensembles, used.n_walkers, used.steps_kept, joint.n_dim)[:, :, -1]
+    physical_last = joint.theta_of(last.reshape(-1, joint.n_dim))
+    joint = JointLogPosterior(model, theta_hat, specs, priors, eps, sensitivity=sensitivity)
+    run = run_joint(joint, used, joint_seed, joint.u_of(*physical_last))
+    return run, used, joint
+
+
 def sample_joint(model, specs, draws, priors, eps, settings, joint_seed, start_seed):
-    """Joint run over all wavelengths with the shared parameters ``specs``, from a pilot.
+    """Joint run of one film problem (:class:`FilmLayout`) with the shared parameters ``specs``, from a pilot.
+
+    :func:`sample_blocks` with the film's records.
 
     Parameters
     ----------
@@ -570,39 +797,8 @@ def sample_joint(model, specs, draws, priors, eps, settings, joint_seed, start_s
         ``(draws (chain, draw, size), autocorrelation times (size,))``; the settings used; the
         :class:`JointLogPosterior`.
     """
-    theta_hat = np.median(draws, axis=0)
-    joint = JointLogPosterior(model, theta_hat, specs, priors, eps)
+    run, used, joint = sample_blocks(model, specs, draws, settings, joint_seed, start_seed, priors, eps)
     n_wl, G = joint.n_wavelengths, joint.n_groups
-    # blocks of 1 + G (a wavelength) and n_shared parameters: DE needs a few walkers per dimension
-    n_walkers = max(settings.n_walkers, 4 * max(1 + G, joint.n_shared), 6)
-    used = dataclasses.replace(settings, n_walkers=n_walkers + n_walkers % 2)
-    # walkers start on the pilot's draws (independently per wavelength) with phi ~ phi_0
-    rng = np.random.default_rng(start_seed)
-    n_total = used.n_ensembles * used.n_walkers
-    picked = draws[rng.integers(0, draws.shape[0], size=(n_total, n_wl)), np.arange(n_wl)]  # (n, wl, 1 + G)
-    residual = np.concatenate([picked[..., 0], picked[..., 1:].reshape(n_total, -1)], axis=1) - joint.theta_hat
-    spread = np.concatenate([np.asarray(s.start_sd, dtype=float) for s in joint.specs])
-    start = np.concatenate([residual, rng.normal(joint.shared_nominal, spread, (n_total, joint.n_shared))], axis=1)
-    start[:, joint.shared_slice] = np.clip(start[:, joint.shared_slice], joint.shared_lower, joint.shared_upper)
-    adapt_seed, joint_seed = joint_seed.spawn(2)
-
-    def run_joint(posterior, run_settings, seed, walkers):
-        return _sample_stack(posterior, [posterior], np.zeros((1, posterior.n_dim)), run_settings, [seed],
-                             moves=[(BlockwiseMove(posterior, used.n_ensembles), 1.0 - JOINT_DE_WEIGHT),
-                                    (IndependentEnsemblesMove("de", used.n_ensembles), JOINT_DE_WEIGHT)],
-                             start_walkers=walkers, dense_check=True)[0]
-
-    # adaptation: a short run whose draws give the regression's centre and sensitivity
-    adapt_steps = max(ADAPTATION_STEPS, used.steps_kept)
-    adaptation = run_joint(joint, dataclasses.replace(used, min_steps=adapt_steps, max_steps=adapt_steps,
-                                                      check_interval=adapt_steps),
-                           adapt_seed, start)
-    adapted = adaptation["theta"].reshape(-1, joint.n_dim)
-    theta_hat, sensitivity = joint.regression(adapted)
-    last = adaptation["theta"].reshape(used.n_ensembles, used.n_walkers, used.steps_kept, joint.n_dim)[:, :, -1]
-    physical_last = joint.theta_of(last.reshape(-1, joint.n_dim))
-    joint = JointLogPosterior(model, theta_hat, specs, priors, eps, sensitivity=sensitivity)
-    run = run_joint(joint, used, joint_seed, joint.u_of(*physical_last))
     theta = run.pop("theta")
     n_chains, n_draws, n_dim = theta.shape
     flat = theta.reshape(-1, n_dim)

@@ -1,0 +1,151 @@
+"""The pigment library build (bayespig.library.build): recovery of known constants from
+simulated films of known recipes, the stage plan, save/load."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from bayespig.data import simulate
+from bayespig.data.simulate import FilmSpec
+from bayespig.inference import InferenceSettings
+from bayespig.library import PigmentLibrary, build_library, load_library, stage_plan
+from bayespig.library._recipes_stub import Recipe
+from bayespig.table import load_table
+
+WAVELENGTHS = np.array([450.0, 550.0, 650.0])
+EPS = 0.01
+#: The true constants per pigment and wavelength: a (relative absorption) and sigma (optical
+#: thickness per unit concentration at h = 1).
+TRUTH = {
+    "White": (np.array([0.004, 0.002, 0.003]), np.array([5.0, 4.5, 4.0])),
+    "Black": (np.array([0.85, 0.82, 0.80]), np.array([150.0, 140.0, 130.0])),
+    "Red": (np.array([0.70, 0.40, 0.03]), np.array([25.0, 20.0, 12.0])),
+}
+#: Recipes (mass fractions): masstones, tints with the white, shades with the black.
+RECIPES = {
+    "W": {"White": 1.0},
+    "WB1": {"White": 0.97, "Black": 0.03},
+    "WB2": {"White": 0.90, "Black": 0.10},
+    "R": {"Red": 1.0},
+    "RW1": {"Red": 0.1, "White": 0.9},
+    "RW2": {"Red": 0.5, "White": 0.5},
+    "RB": {"Red": 0.9, "Black": 0.1},
+}
+#: Films' measured thicknesses: the truth is the measurement times exp(N(0, MEASURED_SD^2)),
+#: the prior's own spread (FilmThickness, MEASURED_RELATIVE_SD), so that the truth is a draw
+#: from the prior.
+MEASURED_SD = 0.1
+QUICK = InferenceSettings(target_ess=400.0, draws_per_chain=256, max_steps=20000)
+#: Nominal coverage of the 90 % intervals and the tolerance: with n constants the count inside is
+#: Binomial(n, 0.9) for independent constants; we accept any count above the binomial's 0.1 %
+#: quantile (the constants of one pigment share its films' thicknesses, so the count is more
+#: spread than binomial; the cut posterior's fixed earlier pigments make it somewhat narrower).
+COVERAGE, COVERAGE_QUANTILE = 0.9, 0.001
+
+
+def _film(name, recipe, h, seed, table):
+    weight = {p: f * TRUTH[p][1] for p, f in recipe.items()}
+    total = sum(weight.values())
+    a = sum(TRUTH[p][0] * w for p, w in weight.items()) / total
+    ms = simulate(a=a, tau=h * total, design=[
+        FilmSpec(f"{name}_ob", substrate=0.05, film_group=name, measure_substrate=True),
+        FilmSpec(f"{name}_ow", substrate=0.85, film_group=name, measure_substrate=True)],
+        instrument="8d-sce", wavelengths=WAVELENGTHS, eps=EPS, seed=seed, model=table)
+    pigments = sorted(recipe)
+    metadata = dict(ms.metadata, composition={"pigments": pigments, "mass_ratios": [recipe[p] for p in pigments]})
+    return dataclasses.replace(ms, metadata=metadata)
+
+
+@pytest.fixture(scope="module")
+def simulated():
+    table = load_table("8d-sce", progress=False)
+    rng = np.random.default_rng(2024)
+    measured = {name: float(np.exp(rng.normal(0.0, 0.3))) for name in RECIPES}
+    truth_h = {name: h * float(np.exp(rng.normal(0.0, MEASURED_SD))) for name, h in measured.items()}
+    sets = {name: _film(name, recipe, truth_h[name], 100 + k, table) for k, (name, recipe) in enumerate(RECIPES.items())}
+    return sets, measured, truth_h
+
+
+@pytest.fixture(scope="module")
+def library(simulated):
+    sets, measured, _ = simulated
+    return build_library(sets, seed=3, progress=False, eps=EPS, thickness=measured, settings=QUICK,
+                         base_pigments=["White", "Black"])
+
+
+def test_the_stage_plan_fits_the_base_then_each_pigment_alone():
+    """Base White and Black from their films, then Red from the films where it is the only
+    unknown; a film whose pigments were all fitted before it is unused. By default every
+    pigment in >= 1/4 of the films is base: here all three, in one joint stage."""
+    recipes = {name: Recipe(recipe) for name, recipe in RECIPES.items()}
+    stages, unused = stage_plan(recipes, ["White", "Black"])
+    assert stages == [[(("Black", "White"), ("W", "WB1", "WB2"))], [(("Red",), ("R", "RB", "RW1", "RW2"))]]
+    assert unused == ()
+    assert stage_plan(recipes) == ([[(("Black", "Red", "White"), tuple(sorted(RECIPES)))]], ())
+    recipes["Bl"] = Recipe({"Blue": 1.0})
+    recipes["RBl"] = Recipe({"Red": 0.5, "Blue": 0.5})  # Red and Blue are fitted in stage 2 without it
+    stages, unused = stage_plan(recipes, ["White", "Black"])
+    assert stages[1] == [(("Blue",), ("Bl",)), (("Red",), ("R", "RB", "RW1", "RW2"))]
+    assert unused == ("RBl",)
+    del recipes["Bl"]  # now RBl is the one film of the unknown Blue: a third stage
+    assert stage_plan(recipes, ["White", "Black"])[0][2] == [(("Blue",), ("RBl",))]
+    with pytest.raises(ValueError, match=r"base_pigments: \['Green'\] are in no film's recipe"):
+        stage_plan(recipes, ["Green"])
+
+
+def test_the_library_recovers_known_constants(library, simulated):
+    """Every true constant (a and log sigma of 3 pigments at 3 wavelengths) inside its 90 %
+    interval at the nominal rate; every stage converged (not capped, R-hat <= 1.01, the
+    thicknesses' ESS >= 400); the thicknesses' 90 % intervals hold the truth at the nominal rate."""
+    _, _, truth_h = simulated
+    assert isinstance(library, PigmentLibrary)
+    assert library.constants.shape == (QUICK.n_ensembles * QUICK.draws_per_chain, WAVELENGTHS.size, 3, 2)
+    inside = []
+    for j, pigment in enumerate(library.pigments):
+        a, sigma = TRUTH[pigment]
+        for c, truth in enumerate((a, np.log(sigma))):
+            low, high = np.quantile(library.constants[:, :, j, c], [0.05, 0.95], axis=0)
+            inside.extend((low <= truth) & (truth <= high))
+    n = len(inside)
+    assert sum(inside) >= stats.binom(n, COVERAGE).ppf(COVERAGE_QUANTILE), (sum(inside), n)
+    for stage in library.stages:
+        assert not stage["max_steps_reached"]
+        assert stage["thickness_rhat_max"] <= 1.01 and stage["thickness_ess_min"] >= 400
+    low, high = np.quantile(library.thickness, [0.05, 0.95], axis=0)
+    truth = np.array([truth_h[f] for f in library.film_ids])
+    assert ((low <= truth) & (truth <= high)).sum() >= stats.binom(truth.size, COVERAGE).ppf(COVERAGE_QUANTILE)
+    for film in library.films:
+        assert film["used"] and film["rms_log_deviation"] < 3 * EPS
+
+
+def test_save_and_load_round_trip(library, tmp_path):
+    path = library.save(tmp_path / "library.nc")
+    back = load_library(path)
+    np.testing.assert_array_equal(back.constants, library.constants)
+    np.testing.assert_array_equal(back.thickness, library.thickness)
+    np.testing.assert_array_equal(back.wavelength_nm, library.wavelength_nm)
+    for field in ("model", "pigments", "constant_names", "thickness_prior", "films", "film_ids", "densities",
+                  "provenance", "stages", "model_error"):
+        assert getattr(back, field) == getattr(library, field), field
+    assert [p.name for p in tmp_path.iterdir()] == ["library.nc"]  # no temporary left behind
+
+
+def test_load_library_names_a_file_that_is_not_a_library(tmp_path):
+    with pytest.raises(ValueError, match="'.*nothing.nc' cannot be read: file not found"):
+        load_library(tmp_path / "nothing.nc")
+    import arviz as az
+    import xarray as xr
+
+    other = tmp_path / "posterior.nc"
+    az.InferenceData(posterior=xr.Dataset({"a": (("chain", "draw"), np.zeros((1, 3)))})).to_netcdf(str(other))
+    with pytest.raises(ValueError, match="posterior.nc' is not a bayespig pigment library"):
+        load_library(other)
+
+
+def test_bad_arguments():
+    with pytest.raises(TypeError, match="measurements must be a non-empty dict"):
+        build_library([], progress=False)
+    with pytest.raises(ValueError, match="model must be one of"):
+        build_library({"x": None}, model="nonsense", progress=False)
