@@ -31,7 +31,12 @@ propagated into the later stages' fits, and a film all of whose pigments were fi
 could be used (Revigo: the two-colour mixtures 08D-08G, 16D-16F, 17D, 17F) is not used at all
 (marked ``used=False`` in :attr:`PigmentLibrary.films`; a candidate for validation). The
 library's draws of each pigment are those of its own stage, independent between stages, so a
-prediction with the library's draws does carry every pigment's posterior uncertainty.
+prediction with the library's draws does carry every pigment's posterior uncertainty. Where an
+earlier pigment's posterior is wide (a nearly opaque white's ``sigma`` is bounded only from
+below by its films), its median is a poor point to fix, and the later films it tints can then
+be fitted worse than their noise: each film's ``rms_log_deviation`` shows it (simulated: a white
+of ``tau ~ 15`` left a 10 % tint at 5.8 % rms against 1 % noise; at ``tau ~ 7`` all films fit
+to 0.1-1.3 %).
 
 Start of each run: a per-wavelength least-squares fit of the stage's constants at the nominal
 thicknesses (``h = 1``, or the measured ones; best of a few starts per wavelength), the walkers
