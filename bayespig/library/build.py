@@ -54,6 +54,7 @@ import importlib.metadata
 import os
 import sys
 import time
+from concurrent.futures import as_completed
 from pathlib import Path
 
 import numpy as np
@@ -405,15 +406,7 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
                 "eps": float(eps), "settings": settings, "seed": int(seed), "spawn_key": (s, g),
             })
         stage_start = time.perf_counter()
-        with executor_or_local_pool(executor, needed=len(tasks) > 1, max_workers=min(2, len(tasks))) as pool:
-            if pool is None:
-                done = [_fit_group(t) for t in tasks]
-            else:
-                futures = [pool.submit(_fit_group, t) for t in tasks]
-                done = [f.result() for f in futures]
-        for result in done:
-            for j, p in enumerate(result["pigments"]):
-                medians[p] = np.median(result["constants"][:, :, j], axis=0)
+        def report(result):
             if progress:
                 d = result["diagnostics"]
                 print(f"library stage {s}/{len(stages)}: {', '.join(d['pigments'])} from {len(d['films'])} films: "
@@ -421,6 +414,19 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
                       f"R-hat <= {max(d['thickness_rhat_max'], d['constants_rhat_max']):.3f}, "
                       f"thickness ESS >= {d['thickness_ess_min']:.0f}, {d['seconds']:.1f} s",
                       file=sys.stderr, flush=True)
+            return result
+
+        with executor_or_local_pool(executor, needed=len(tasks) > 1, max_workers=min(2, len(tasks))) as pool:
+            if pool is None:
+                done = [report(_fit_group(t)) for t in tasks]
+            else:
+                futures = [pool.submit(_fit_group, t) for t in tasks]
+                for future in as_completed(futures):
+                    report(future.result())
+                done = [f.result() for f in futures]
+        for result in done:
+            for j, p in enumerate(result["pigments"]):
+                medians[p] = np.median(result["constants"][:, :, j], axis=0)
         if progress:
             print(f"library stage {s}/{len(stages)} done in {time.perf_counter() - stage_start:.1f} s",
                   file=sys.stderr, flush=True)

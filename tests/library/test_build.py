@@ -1,7 +1,10 @@
 """The pigment library build (bayespig.library.build): recovery of known constants from
 simulated films of known recipes, the stage plan, save/load."""
 
+import contextlib
 import dataclasses
+import io
+import re
 
 import numpy as np
 import pytest
@@ -69,10 +72,32 @@ def simulated():
 
 
 @pytest.fixture(scope="module")
-def library(simulated):
+def built(simulated):
+    """The library and its progress lines (stderr)."""
     sets, measured, _ = simulated
-    return build_library(sets, seed=3, progress=False, eps=EPS, thickness=measured, settings=QUICK,
-                         base_pigments=["White", "Black"])
+    lines = io.StringIO()
+    with contextlib.redirect_stderr(lines):
+        library = build_library(sets, seed=3, progress=True, eps=EPS, thickness=measured, settings=QUICK,
+                                base_pigments=["White", "Black"])
+    return library, lines.getvalue().splitlines()
+
+
+@pytest.fixture(scope="module")
+def library(built):
+    return built[0]
+
+
+def test_progress_says_each_stage(built):
+    """One line per stage group (pigments, films, steps, R-hat, ESS, time) and one per stage."""
+    library, lines = built
+    assert len(lines) == 4
+    for line, stage in zip(lines[::2], library.stages):
+        assert line == (f"library stage {stage['stage']}/2: {', '.join(stage['pigments'])} from "
+                        f"{len(stage['films'])} films: {stage['n_steps']} steps, R-hat <= "
+                        f"{max(stage['thickness_rhat_max'], stage['constants_rhat_max']):.3f}, thickness ESS >= "
+                        f"{stage['thickness_ess_min']:.0f}, {stage['seconds']:.1f} s")
+    assert re.fullmatch(r"library stage 1/2 done in [0-9.]+ s", lines[1])
+    assert re.fullmatch(r"library stage 2/2 done in [0-9.]+ s", lines[3])
 
 
 def test_the_stage_plan_fits_the_base_then_each_pigment_alone():
