@@ -1,6 +1,6 @@
 """Time to build the pigment library of the whole Revigo palette on 2 cores (goal <= 10 min).
 
-Usage:  python benchmarks/library.py [REVIGO_FOLDER] [--seed N] [--save PATH]
+Usage:  python benchmarks/library.py [REVIGO_FOLDER] [--seed N] [--save PATH] [--max-steps N]
 
 Builds :func:`bayespig.library.build_library` on every Revigo film (default folder
 ``/work/shared/data/revigo``) with a local pool of 2 processes for each stage's independent
@@ -27,15 +27,23 @@ def main(argv=None):
     parser.add_argument("folder", nargs="?", default=DEFAULT_FOLDER)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--save", default=None, help="write the library here (netCDF)")
+    parser.add_argument("--max-steps", type=int, default=None,
+                        help="cap of every stage's run (default that of DEFAULT_SETTINGS, 20000)")
     args = parser.parse_args(argv)
+
+    import dataclasses
 
     from bayespig.data import read_revigo
     from bayespig.library import build_library
+    from bayespig.library.build import DEFAULT_SETTINGS
+
+    settings = DEFAULT_SETTINGS if args.max_steps is None else dataclasses.replace(DEFAULT_SETTINGS,
+                                                                                   max_steps=args.max_steps)
 
     print(machine_line(), flush=True)
     sets = read_revigo(args.folder)
     start = time.perf_counter()
-    library = build_library(sets, seed=args.seed, progress=True)
+    library = build_library(sets, seed=args.seed, progress=True, settings=settings)
     total = time.perf_counter() - start
     print(f"{'stage':>5} {'pigments':<24} {'films':>5} {'steps':>6} {'capped':>6} {'R-hat h':>8} {'ESS h':>7} "
           f"{'R-hat c':>8} {'ESS c':>7} {'s':>7}")

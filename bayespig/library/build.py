@@ -264,12 +264,22 @@ def _least_squares_start(layout, thickness):
     return best
 
 
+def _portable(measurements):
+    """A MeasurementSet as picklable fields (its metadata is a read-only mapping, which pickle refuses)."""
+    fields = {f.name: getattr(measurements, f.name) for f in dataclasses.fields(measurements)}
+    fields["metadata"] = dict(fields["metadata"])
+    return fields
+
+
 def _fit_group(task):
     """One stage group's joint run (a process-pool task): constants and thickness draws."""
+    from ..data import MeasurementSet
+
     start_time = time.perf_counter()
     film_model = _film_model(task["model"])
-    predictors = [film_model.for_film(ms) for ms in task["measurements"]]
-    wavelength_nm = np.asarray(task["measurements"][0].wavelength_nm, dtype=float)
+    sets = [MeasurementSet(**fields) for fields in task["measurements"]]
+    predictors = [film_model.for_film(ms) for ms in sets]
+    wavelength_nm = np.asarray(sets[0].wavelength_nm, dtype=float)
     layout = LibraryLayout(film_model, predictors, task["concentrations"], task["pigments"],
                            task["fixed_constants"], task["eps"], wavelength_nm)
     spec = FilmThickness(task["films"], measured=task["measured"])
@@ -398,7 +408,7 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
             fixed = sorted({p for f in films for p in recipes[f].amounts} - set(pigments))
             order = tuple(pigments) + tuple(fixed)
             tasks.append({
-                "model": model, "measurements": [sets[f] for f in films], "films": films,
+                "model": model, "measurements": [_portable(sets[f]) for f in films], "films": films,
                 "pigments": tuple(pigments), "stage": s,
                 "concentrations": np.stack([concentrations(recipes[f], order, densities=densities) for f in films]),
                 "fixed_constants": (np.stack([medians[p] for p in fixed], axis=1) if fixed else None),
