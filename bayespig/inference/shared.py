@@ -53,7 +53,8 @@ Pilot start, adaptation
     :func:`sample_joint`: a per-wavelength run, the usual
     :func:`bayespig.inference.infer_problem`; for a library, a ball around a point fit), uses
     their medians as ``theta_hat``, and starts the walkers on them (picked independently per
-    wavelength) with ``phi`` in a small ball around ``phi_0``. A joint run of :data:`ADAPTATION_STEPS` steps from there gives the
+    wavelength) with ``phi`` in a small ball around ``phi_0`` (a start whose shift
+    ``S (phi - phi_0)`` would take a block out of its box starts at its picked physical point). A joint run of :data:`ADAPTATION_STEPS` steps from there gives the
     regression's ``theta_hat`` and ``S``; the run proper starts on its last walkers (the same
     physical points in the new coordinates). Any fixed ``S`` leaves the target invariant; the
     adaptation's draws are not kept.

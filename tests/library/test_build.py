@@ -1,7 +1,10 @@
 """The pigment library build (bayespig.library.build): recovery of known constants from
 simulated films of known recipes, the stage plan, save/load."""
 
+import contextlib
 import dataclasses
+import io
+import re
 
 import numpy as np
 import pytest
@@ -22,6 +25,7 @@ TRUTH = {
     "White": (np.array([0.004, 0.002, 0.003]), np.array([5.0, 4.5, 4.0])),
     "Black": (np.array([0.85, 0.82, 0.80]), np.array([150.0, 140.0, 130.0])),
     "Red": (np.array([0.70, 0.40, 0.03]), np.array([25.0, 20.0, 12.0])),
+    "Blue": (np.array([0.10, 0.50, 0.80]), np.array([8.0, 15.0, 30.0])),
 }
 #: Recipes (mass fractions): masstones, tints with the white, shades with the black.
 RECIPES = {
@@ -32,6 +36,8 @@ RECIPES = {
     "RW1": {"Red": 0.1, "White": 0.9},
     "RW2": {"Red": 0.5, "White": 0.5},
     "RB": {"Red": 0.9, "Black": 0.1},
+    "U": {"Blue": 1.0},
+    "UW": {"Blue": 0.3, "White": 0.7},
 }
 #: Films' measured thicknesses: the truth is the measurement times exp(N(0, MEASURED_SD^2)),
 #: the prior's own spread (FilmThickness, MEASURED_RELATIVE_SD), so that the truth is a draw
@@ -69,39 +75,64 @@ def simulated():
 
 
 @pytest.fixture(scope="module")
-def library(simulated):
+def built(simulated):
+    """The library and its progress lines (stderr)."""
     sets, measured, _ = simulated
-    return build_library(sets, seed=3, progress=False, eps=EPS, thickness=measured, settings=QUICK,
-                         base_pigments=["White", "Black"])
+    lines = io.StringIO()
+    with contextlib.redirect_stderr(lines):
+        library = build_library(sets, seed=3, progress=True, eps=EPS, thickness=measured, settings=QUICK,
+                                base_pigments=["White", "Black"])
+    return library, lines.getvalue().splitlines()
+
+
+@pytest.fixture(scope="module")
+def library(built):
+    return built[0]
+
+
+def test_progress_says_each_stage(built):
+    """One line per stage group (pigments, films, steps, R-hat, ESS, time), as it completes (stage
+    2's two groups run in a local pool of 2 processes), and one per stage."""
+    library, lines = built
+    assert len(lines) == 5
+    group_lines = lines[:1] + lines[2:4]
+    expected = []
+    for stage in library.stages:
+        expected.append(f"library stage {stage['stage']}/2: {', '.join(stage['pigments'])} from "
+                        f"{len(stage['films'])} films: {stage['n_steps']} steps, R-hat <= "
+                        f"{max(stage['thickness_rhat_max'], stage['constants_rhat_max']):.3f}, thickness ESS >= "
+                        f"{stage['thickness_ess_min']:.0f}, {stage['seconds']:.1f} s")
+    assert group_lines[0] == expected[0] and sorted(group_lines[1:]) == sorted(expected[1:])
+    assert re.fullmatch(r"library stage 1/2 done in [0-9.]+ s", lines[1])
+    assert re.fullmatch(r"library stage 2/2 done in [0-9.]+ s", lines[4])
 
 
 def test_the_stage_plan_fits_the_base_then_each_pigment_alone():
-    """Base White and Black from their films, then Red from the films where it is the only
-    unknown; a film whose pigments were all fitted before it is unused. By default every
-    pigment in >= 1/4 of the films is base: here all three, in one joint stage."""
+    """Base White and Black from their films, then Red and Blue (two groups) from the films
+    where each is the only unknown; a film whose pigments were all fitted before it is unused.
+    By default every pigment in >= 1/4 of the films is base: here White, Black and Red."""
     recipes = {name: Recipe(recipe) for name, recipe in RECIPES.items()}
     stages, unused = stage_plan(recipes, ["White", "Black"])
-    assert stages == [[(("Black", "White"), ("W", "WB1", "WB2"))], [(("Red",), ("R", "RB", "RW1", "RW2"))]]
+    assert stages == [[(("Black", "White"), ("W", "WB1", "WB2"))],
+                      [(("Blue",), ("U", "UW")), (("Red",), ("R", "RB", "RW1", "RW2"))]]
     assert unused == ()
-    assert stage_plan(recipes) == ([[(("Black", "Red", "White"), tuple(sorted(RECIPES)))]], ())
-    recipes["Bl"] = Recipe({"Blue": 1.0})
-    recipes["RBl"] = Recipe({"Red": 0.5, "Blue": 0.5})  # Red and Blue are fitted in stage 2 without it
-    stages, unused = stage_plan(recipes, ["White", "Black"])
-    assert stages[1] == [(("Blue",), ("Bl",)), (("Red",), ("R", "RB", "RW1", "RW2"))]
-    assert unused == ("RBl",)
-    del recipes["Bl"]  # now RBl is the one film of the unknown Blue: a third stage
-    assert stage_plan(recipes, ["White", "Black"])[0][2] == [(("Blue",), ("RBl",))]
+    assert stage_plan(recipes) == ([[(("Black", "Red", "White"), ("R", "RB", "RW1", "RW2", "W", "WB1", "WB2"))],
+                                    [(("Blue",), ("U", "UW"))]], ())
+    recipes["RU"] = Recipe({"Red": 0.5, "Blue": 0.5})  # Red and Blue are fitted in stage 2 without it
+    assert stage_plan(recipes, ["White", "Black"])[1] == ("RU",)
+    del recipes["U"], recipes["UW"]  # now RU is the one film of the unknown Blue: a third stage
+    assert stage_plan(recipes, ["White", "Black"])[0][2] == [(("Blue",), ("RU",))]
     with pytest.raises(ValueError, match=r"base_pigments: \['Green'\] are in no film's recipe"):
         stage_plan(recipes, ["Green"])
 
 
 def test_the_library_recovers_known_constants(library, simulated):
-    """Every true constant (a and log sigma of 3 pigments at 3 wavelengths) inside its 90 %
+    """Every true constant (a and log sigma of 4 pigments at 3 wavelengths) inside its 90 %
     interval at the nominal rate; every stage converged (not capped, R-hat <= 1.01, the
     thicknesses' ESS >= 400); the thicknesses' 90 % intervals hold the truth at the nominal rate."""
     _, _, truth_h = simulated
     assert isinstance(library, PigmentLibrary)
-    assert library.constants.shape == (QUICK.n_ensembles * QUICK.draws_per_chain, WAVELENGTHS.size, 3, 2)
+    assert library.constants.shape == (QUICK.n_ensembles * QUICK.draws_per_chain, WAVELENGTHS.size, 4, 2)
     inside = []
     for j, pigment in enumerate(library.pigments):
         a, sigma = TRUTH[pigment]
