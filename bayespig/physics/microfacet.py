@@ -1,9 +1,9 @@
 """A rough dielectric interface: the microfacet BSDF of Walter et al. (2007) and its azimuthal modes.
 
-Groundwork for a rough air/binder surface (issue 16; DESIGN.md, "Rough top surface"). Nothing
-here is wired into the forward model yet: this module gives the surface's scattering functions,
-point by point and as the azimuthal Fourier kernels a discrete-ordinate solver would use at its
-top boundary instead of the smooth surface's diagonal Fresnel reflectance ``r_F``.
+The rough air/binder surface (issue 16; DESIGN.md, "Rough top surface"): the surface's
+scattering functions, point by point and as the azimuthal Fourier kernels that
+:mod:`bayespig.physics.rough_surface` integrates against the binder quadrature's basis at the top
+boundary of the layer, instead of the smooth surface's diagonal Fresnel reflectance ``r_F``.
 
 Model
 -----
@@ -536,15 +536,22 @@ def _check_mode_arguments(mu_out, mu_in, n_modes, points_per_panel):
     return mu_out, mu_in, int(n_modes), int(points_per_panel)
 
 
-def _modes(kernel, mu_out, mu_in, n_modes, alpha, kink, points_per_panel, narrowing=1.0):
-    """``K_m[o, i] = int_0^{2 pi} kernel(mu_i, mu_o, psi) cos(m psi) dpsi``, m < n_modes.
+def _first_mode(first_mode):
+    if isinstance(first_mode, bool) or not isinstance(first_mode, (int, np.integer)) or first_mode < 0:
+        raise ValueError(f"first_mode must be an integer >= 0, got {first_mode!r}")
+    return int(first_mode)
+
+
+def _modes(kernel, mu_out, mu_in, n_modes, alpha, kink, points_per_panel, narrowing=1.0, first_mode=0):
+    """``K_m[o, i] = int_0^{2 pi} kernel(mu_i, mu_o, psi) cos(m psi) dpsi``, for
+    ``m = first_mode .. first_mode + n_modes - 1``.
 
     ``kernel(mu_in_col, mu_out_row, cos_psi)`` is a radiance BSDF [1/sr]; ``kink(mu_in, mu_out)``
     the cosine of its non-smooth azimuth per pair (``inf`` for none); ``narrowing`` scales the
     finest azimuth panel (:data:`AZIMUTH_FINEST_PANEL`).
     """
     modes = np.empty((n_modes, mu_out.size, mu_in.size))
-    bounds = _azimuth_panels(alpha, points_per_panel, n_modes, narrowing)
+    bounds = _azimuth_panels(alpha, points_per_panel, first_mode + n_modes, narrowing)
     per_row = max(1, _CHUNK_ELEMENTS // (mu_in.size * points_per_panel * bounds.size))
     for start in range(0, mu_out.size, per_row):
         rows = slice(start, start + per_row)
@@ -556,16 +563,16 @@ def _modes(kernel, mu_out, mu_in, n_modes, alpha, kink, points_per_panel, narrow
         cos_psi = np.cos(psi)
         # f even in psi: int over [0, 2 pi] = 2 int over [0, pi]
         weighted = 2.0 * weight * kernel(m_i[..., None], m_o[..., None], cos_psi)
-        previous, current = np.ones_like(cos_psi), cos_psi
-        modes[0, rows] = weighted.sum(axis=-1)
-        for m in range(1, n_modes):
+        # Chebyshev: cos((m+1) psi) = 2 cos(psi) cos(m psi) - cos((m-1) psi)
+        previous, current = np.cos((first_mode - 1) * psi), np.cos(first_mode * psi)
+        for m in range(n_modes):
             modes[m, rows] = (weighted * current).sum(axis=-1)
-            previous, current = current, 2.0 * cos_psi * current - previous  # Chebyshev: cos((m+1) psi)
+            previous, current = current, 2.0 * cos_psi * current - previous
     return modes
 
 
 def reflection_modes(mu_out, mu_in, n_modes, *, alpha, n_i, n_t, distribution="ggx",
-                     points_per_panel=AZIMUTH_POINTS_PER_PANEL):
+                     points_per_panel=AZIMUTH_POINTS_PER_PANEL, first_mode=0):
     """Azimuthal Fourier kernels of the reflection on the side of medium ``n_i``.
 
     ``K_m[o, i] = int_0^{2 pi} f_r(mu_i, mu_o, psi) cos(m psi) dpsi = 2 pi f_m`` with
@@ -590,6 +597,9 @@ def reflection_modes(mu_out, mu_in, n_modes, *, alpha, n_i, n_t, distribution="g
     distribution : {"ggx", "beckmann"}
     points_per_panel : int
         Gauss points per azimuth panel.
+    first_mode : int
+        The first mode computed: ``m = first_mode .. first_mode + n_modes - 1`` (blocks of
+        modes, as the forward model asks for them).
 
     Returns
     -------
@@ -613,11 +623,11 @@ def reflection_modes(mu_out, mu_in, n_modes, *, alpha, n_i, n_t, distribution="g
         return (m_i * m_o - 1.0 + 2.0 * r2) / (np.sqrt(1.0 - m_i * m_i) * np.sqrt(1.0 - m_o * m_o))
 
     narrowing = min(1.0, float(mu_out.min() + mu_in.min()))  # the lobe narrows between grazing directions
-    return _modes(kernel, mu_out, mu_in, n_modes, alpha, kink, points_per_panel, narrowing)
+    return _modes(kernel, mu_out, mu_in, n_modes, alpha, kink, points_per_panel, narrowing, _first_mode(first_mode))
 
 
 def transmission_modes(mu_out, mu_in, n_modes, *, alpha, n_i, n_t, distribution="ggx",
-                       points_per_panel=AZIMUTH_POINTS_PER_PANEL):
+                       points_per_panel=AZIMUTH_POINTS_PER_PANEL, first_mode=0):
     """Azimuthal Fourier kernels of the transmission from medium ``n_i`` into ``n_t``.
 
     ``K_m[o, i] = int_0^{2 pi} f_t(mu_i, mu_o, psi) cos(m psi) dpsi`` in radiance units, as in
@@ -635,6 +645,8 @@ def transmission_modes(mu_out, mu_in, n_modes, *, alpha, n_i, n_t, distribution=
     n_i, n_t : float
     distribution : {"ggx", "beckmann"}
     points_per_panel : int
+    first_mode : int
+        As in :func:`reflection_modes`.
 
     Returns
     -------
@@ -656,7 +668,7 @@ def transmission_modes(mu_out, mu_in, n_modes, *, alpha, n_i, n_t, distribution=
         # i.o = -s_i s_o cos psi - mu_i mu_o = -ratio
         return (ratio - m_i * m_o) / (np.sqrt(1.0 - m_i * m_i) * np.sqrt(1.0 - m_o * m_o))
 
-    return _modes(kernel, mu_out, mu_in, n_modes, alpha, kink, points_per_panel)
+    return _modes(kernel, mu_out, mu_in, n_modes, alpha, kink, points_per_panel, first_mode=_first_mode(first_mode))
 
 
 @dataclass(frozen=True)
