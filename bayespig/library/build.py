@@ -65,9 +65,9 @@ from ..inference.arguments import check_flag
 from ..inference.film_thickness import FilmThickness
 from ..inference.settings import InferenceSettings
 from ..inference.shared import BlockLayout, sample_blocks
-from ._recipes_stub import concentrations, film_recipes
-from ._rt_stub import RadiativeTransferFilmModel
+from .film_models import FILM_MODELS, film_model as _named_film_model
 from .library import PigmentLibrary
+from .recipes import concentrations, film_recipes
 
 __all__ = [
     "BASE_SHARE",
@@ -90,13 +90,10 @@ LEAST_SQUARES_STARTS = ((0.01, 3.0), (0.3, 30.0), (0.001, 300.0), (0.6, 3.0))
 #: Points of the start ball (draws of :func:`~bayespig.inference.shared.sample_blocks`).
 START_POINTS = 64
 
-_MODELS = {"radiative-transfer": RadiativeTransferFilmModel}
-
-
 def _film_model(name):
-    if name not in _MODELS:
-        raise ValueError(f"model must be one of {sorted(_MODELS)}, got {name!r}")
-    return _MODELS[name]()
+    if name not in FILM_MODELS:
+        raise ValueError(f"model must be one of {sorted(FILM_MODELS)}, got {name!r}")
+    return _named_film_model(name)
 
 
 class LibraryLayout(BlockLayout):
@@ -181,7 +178,7 @@ def _components(films_pigments):
     return [(tuple(sorted(p)), tuple(sorted(f))) for p, f in sorted(groups, key=lambda g: sorted(g[0]))]
 
 
-def stage_plan(recipes, base_pigments=None):
+def stage_plan(recipes, base_pigments=None, known=()):
     """The stages of the build (see the module docstring).
 
     Parameters
@@ -190,6 +187,9 @@ def stage_plan(recipes, base_pigments=None):
         Film id -> Recipe.
     base_pigments : sequence of str, optional
         Default: pigments with a nonzero amount in at least :data:`BASE_SHARE` of the films.
+    known : sequence of str
+        Pigments fitted already (a base library's): no stage fits them, films made of them only
+        are unused.
 
     Returns
     -------
@@ -198,13 +198,14 @@ def stage_plan(recipes, base_pigments=None):
         (tuples of str) run independently; and the films used by no stage (tuple of str).
     """
     base = _base_pigments(recipes) if base_pigments is None else tuple(base_pigments)
-    known_pigments = {p for r in recipes.values() for p in r.amounts}
+    base = tuple(p for p in base if p not in set(known))
+    known_pigments = {p for r in recipes.values() for p in r.amounts} | set(known)
     unknown_base = sorted(set(base) - known_pigments)
     if unknown_base:
         raise ValueError(f"base_pigments: {unknown_base} are in no film's recipe")
-    stages, fitted = [], set()
+    stages, fitted = [], set(known)
     remaining = {f: set(r.amounts) for f, r in recipes.items()}
-    base_films = tuple(sorted(f for f, pig in remaining.items() if pig <= set(base)))
+    base_films = tuple(sorted(f for f, pig in remaining.items() if pig <= set(base) and pig - fitted)) if base else ()
     if base_films:
         base_used = tuple(sorted(set().union(*(remaining[f] for f in base_films))))
         stages.append([(base_used, base_films)])
@@ -347,7 +348,7 @@ def _versions():
 
 
 def build_library(measurements, *, model="radiative-transfer", seed=0, executor=None, progress=True,
-                  densities=None, eps=0.02, base_pigments=None, thickness=None, settings=None):
+                  densities=None, eps=0.02, base_pigments=None, thickness=None, settings=None, base=None):
     """A pigment library from films of known recipes (see the module docstring for the stages).
 
     Parameters
@@ -376,6 +377,10 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
         Film id -> measured thickness (one unit for all; the prior's centre); others relative.
     settings : InferenceSettings, optional
         Default :data:`DEFAULT_SETTINGS`.
+    base : PigmentLibrary, optional
+        A library whose pigments count as fitted (its draws are the new library's for them, its
+        medians fix them in the fits of the others): e.g. a white and a black fitted once and
+        shared by many libraries (the leave-one-out study), built with the same model.
 
     Returns
     -------
@@ -397,9 +402,20 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
     wavelengths = [np.asarray(ms.wavelength_nm, dtype=float) for ms in sets.values()]
     if any(w.shape != wavelengths[0].shape or not np.allclose(w, wavelengths[0]) for w in wavelengths):
         raise ValueError("measurements: every film must be measured at the same wavelengths")
-    stages, unused = stage_plan(recipes, base_pigments)
-    n_wl = wavelengths[0].size
+    known = ()
     medians = {}  # pigment -> (n_wl, 2)
+    if base is not None:
+        if not isinstance(base, PigmentLibrary):
+            raise TypeError(f"base must be a PigmentLibrary, got {type(base).__name__}")
+        if base.model != model:
+            raise ValueError(f"base is a {base.model!r} library; this build is {model!r}")
+        if base.wavelength_nm.shape != wavelengths[0].shape or not np.allclose(base.wavelength_nm, wavelengths[0]):
+            raise ValueError("base: its wavelengths differ from the measurements'")
+        known = tuple(base.pigments)
+        for j, p in enumerate(base.pigments):
+            medians[p] = np.median(base.constants[:, :, j], axis=0)
+    stages, unused = stage_plan(recipes, base_pigments, known=known)
+    n_wl = wavelengths[0].size
     results = []
     start = time.perf_counter()
     for s, groups in enumerate(stages, start=1):
@@ -442,15 +458,18 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
                   file=sys.stderr, flush=True)
         results.extend(done)
     return _assemble(film_model, results, recipes, unused, wavelengths[0], seed, settings, eps, densities,
-                     base_pigments, model, stages, time.perf_counter() - start)
+                     base_pigments, model, stages, time.perf_counter() - start, base)
 
 
 def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, settings, eps, densities,
-              base_pigments, model, stages, seconds):
-    """The library from the stage groups' results."""
-    n_draws = min(r["constants"].shape[0] for r in results)
-    pigments = tuple(p for r in results for p in r["pigments"])
-    constants = np.concatenate([r["constants"][:n_draws] for r in results], axis=2)  # (N, n_wl, P, 2)
+              base_pigments, model, stages, seconds, base=None):
+    """The library from the stage groups' results (and a base library's pigments first)."""
+    parts = [r["constants"] for r in results] + ([] if base is None else [base.constants])
+    if not parts:
+        raise ValueError("measurements: no film has a pigment to fit (all are in the base library)")
+    n_draws = min(c.shape[0] for c in parts)
+    pigments = tuple(p for r in results for p in r["pigments"]) + (() if base is None else tuple(base.pigments))
+    constants = np.concatenate([c[:n_draws] for c in parts], axis=2)  # (N, n_wl, P, 2)
     film_ids = tuple(sorted(recipes))
     thickness = np.full((n_draws, len(film_ids)), np.nan)
     films = {}
@@ -467,13 +486,18 @@ def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, setting
         entry.update(films.get(f, {"stage": None, "used": False, "rms_log_deviation": None,
                                    "thickness_median": None, "thickness_q05": None, "thickness_q95": None}))
         records.append(entry)
-    log_h = np.log([films[f]["thickness_median"] for f in films])
+    base_medians = [] if base is None else [f["thickness_median"] for f in base.films
+                                            if f.get("used") and f.get("thickness_median")]
+    log_h = np.log([films[f]["thickness_median"] for f in films] + base_medians)
     thickness_prior = (float(log_h.mean()), float(log_h.std(ddof=1)) if log_h.size > 1 else 0.5)
     provenance = {
         "seed": int(seed), "eps": float(eps), "base_pigments": None if base_pigments is None else list(base_pigments),
         "settings": dataclasses.asdict(settings), "versions": _versions(), "seconds": seconds,
         "stage_plan": [[{"pigments": list(p), "films": list(f)} for p, f in groups] for groups in stages],
         "unused_films": list(unused),
+        "base_library": None if base is None else {"pigments": list(base.pigments),
+                                                   "films": [f["id"] for f in base.films if f.get("used")],
+                                                   "provenance": base.provenance},
         "method": "staged (cut) posterior, bayespig.library.build",
     }
     return PigmentLibrary(
@@ -481,4 +505,4 @@ def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, setting
         constants=constants, constant_names=tuple(film_model.constant_names), thickness_prior=thickness_prior,
         films=tuple(records), film_ids=film_ids, thickness=thickness,
         densities=None if densities is None else dict(densities), model_error=None, provenance=provenance,
-        stages=tuple(r["diagnostics"] for r in results))
+        stages=tuple(r["diagnostics"] for r in results) + (() if base is None else tuple(base.stages)))

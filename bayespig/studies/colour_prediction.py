@@ -117,11 +117,17 @@ def target_films(sets, recipes, series=SERIES):
     return out
 
 
-def training_films(sets, recipes, target):
-    """Films of a leave-one-out library for ``target``: base films and its series, without it."""
-    base = [f for f in sets if _series(f) == BASE_SERIES and set(recipes[f].amounts) <= {WHITE, BLACK}]
-    own = [f for f in sets if _series(f) == _series(target)]
-    return sorted(set(base) | set(own) - {target})
+def training_films(recipes, target, base_pigments=(WHITE, BLACK)):
+    """Films of ``target``'s leave-one-out library: those made only of its pigments and the base
+    pigments, without it; split into ``(base_only, others)``.
+
+    ``base_only`` are the films of base pigments alone (the base library's films); ``others`` the
+    films that add ``target``'s own pigments (Revigo: the rest of its series).
+    """
+    allowed = set(recipes[target].amounts) | set(base_pigments)
+    films = [f for f in sorted(recipes) if f != target and set(recipes[f].amounts) <= allowed]
+    base_only = tuple(f for f in films if set(recipes[f].amounts) <= set(base_pigments))
+    return base_only, tuple(f for f in films if f not in base_only)
 
 
 def _spectra(ms, film_id):
@@ -168,14 +174,20 @@ def _fit_thickness(library, recipe, constants, cards, measured):
     return float(np.exp(result.x))
 
 
+def _build(task):
+    """A library of ``films`` (a process task), on a base library when given."""
+    path, films, model, seed, base = task
+    sets = read_revigo(path)
+    return build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base)
+
+
 def _predict_film(task):
     """Build the leave-one-out library of one target and predict it (one process task)."""
-    path, film_id, model, seed, n_draws = task
+    path, film_id, model, seed, n_draws, films, base = task
     started = time.perf_counter()
     sets = read_revigo(path)
     recipes = film_recipes(sets)
-    training = {f: sets[f] for f in training_films(sets, recipes, film_id)}
-    library = build_library(training, model=model, seed=seed, progress=False)
+    library = build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base)
     recipe = recipes[film_id]
     card_b, card_w, over_b, over_w = _spectra(sets[film_id], film_id)
     cards, measured = (card_b, card_w), np.stack([over_b, over_w])
@@ -187,7 +199,7 @@ def _predict_film(task):
     mean, sd = library.thickness_prior
     h_unknown = np.exp(rng.normal(mean, sd, n_draws))
     wl = library.wavelength_nm
-    spectra, unknown, dE, dE_unknown = [], [], [], []
+    spectra, dE, dE_unknown = [], [], []
     for card, values in zip(cards, measured):
         R = predict_reflectance(library, recipe, draws, np.full(n_draws, h), instrument=INSTRUMENT, substrate=card)
         Ru = predict_reflectance(library, recipe, draws, h_unknown, instrument=INSTRUMENT, substrate=card)
@@ -200,10 +212,10 @@ def _predict_film(task):
     residuals = measured / np.median(spectra, axis=1) - 1.0
     match = match_paint(library, over_w, pigments=tuple(recipe.amounts), instrument=INSTRUMENT, thickness="fit",
                         substrate=card_w, seed=seed, n_spread=0, n_draws=50)
-    converged = bool(getattr(library, "converged", True))
+    capped = any(stage.get("max_steps_reached") for stage in library.stages)
     return FilmPrediction(film_id, model, film_class(recipe), dict(recipe.amounts), h, tuple(dE), tuple(dE_unknown),
                           residuals, spectra, measured, dict(match.recipe.amounts), match.delta_E,
-                          time.perf_counter() - started, converged,
+                          time.perf_counter() - started, not capped,
                           float(wl[np.argmax(np.abs(residuals).max(axis=0))]))
 
 
@@ -280,17 +292,30 @@ def colour_prediction_study(path, *, films=None, models=MODELS, seed=0, executor
     unknown = [f for f in targets if f not in sets]
     if unknown:
         raise ValueError(f"films: {unknown[0]!r} is not a film of {path}")
-    tasks = [(str(path), f, m, seed, n_draws) for m in models for f in targets]
-    results = []
+    say = progress or (lambda message: None)
     started = time.perf_counter()
+    results = []
     with executor_or_local_pool(executor) as pool:
+        # the base libraries (white and black from their own films), once per model
+        plans = {f: training_films(recipes, f) for f in targets}
+        base_films = sorted({g for base_only, _ in plans.values() for g in base_only})
+        bases = {m: pool.submit(_build, (str(path), base_films, m, seed, None)) for m in models}
+        bases = {m: future.result() for m, future in bases.items()}
+        say(f"base libraries ({', '.join(base_films)}) built: {time.perf_counter() - started:.0f} s")
+        tasks = []
+        for m in models:
+            for f in targets:
+                base_only, others = plans[f]
+                if others:  # the base films are all there (the target is not one): share the base library
+                    tasks.append((str(path), f, m, seed, n_draws, others, bases[m]))
+                else:  # a base-only target: its library is built without it from the others
+                    tasks.append((str(path), f, m, seed, n_draws, base_only, None))
         futures = [pool.submit(_predict_film, task) for task in tasks]
         for i, future in enumerate(futures, 1):
             p = future.result()
             results.append(p)
-            if progress:
-                progress(f"[{i}/{len(tasks)}] {p.model} {p.film_id}: ΔE00 {p.delta_E[0]:.2f} / {p.delta_E[1]:.2f} "
-                         f"(black / white), {p.seconds:.0f} s; {time.perf_counter() - started:.0f} s in all")
+            say(f"[{i}/{len(tasks)}] {p.model} {p.film_id}: ΔE00 {p.delta_E[0]:.2f} / {p.delta_E[1]:.2f} "
+                f"(black / white), {p.seconds:.0f} s; {time.perf_counter() - started:.0f} s in all")
     wl = sets[targets[0]].wavelength_nm if targets else np.array([])
     coverage, inside, radius = _coverage(results, wl, seed)
     settings = {"seed": seed, "n_draws": n_draws, "instrument": INSTRUMENT, "level": LEVEL, "models": list(models),

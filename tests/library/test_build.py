@@ -14,7 +14,7 @@ from bayespig.data import simulate
 from bayespig.data.simulate import FilmSpec
 from bayespig.inference import InferenceSettings
 from bayespig.library import PigmentLibrary, build_library, load_library, stage_plan
-from bayespig.library._recipes_stub import Recipe
+from bayespig.library.recipes import Recipe
 from bayespig.table import load_table
 
 WAVELENGTHS = np.array([450.0, 550.0, 650.0])
@@ -43,6 +43,9 @@ RECIPES = {
 #: the prior's own spread (FilmThickness, MEASURED_RELATIVE_SD), so that the truth is a draw
 #: from the prior.
 MEASURED_SD = 0.1
+#: Unit densities: the simulation's concentrations are the mass fractions (appendix A2 with equal
+#: densities; the handbook fallback for unknown names would scale every sigma by 1 / 3.32).
+DENSITIES = {p: 1.0 for p in TRUTH}
 QUICK = InferenceSettings(target_ess=400.0, draws_per_chain=256, max_steps=20000)
 #: Nominal coverage of the 90 % intervals and the tolerance: with n constants the count inside is
 #: Binomial(n, 0.9) for independent constants; we accept any count above the binomial's 0.1 %
@@ -81,7 +84,7 @@ def built(simulated):
     lines = io.StringIO()
     with contextlib.redirect_stderr(lines):
         library = build_library(sets, seed=3, progress=True, eps=EPS, thickness=measured, settings=QUICK,
-                                base_pigments=["White", "Black"])
+                                base_pigments=["White", "Black"], densities=DENSITIES)
     return library, lines.getvalue().splitlines()
 
 
@@ -180,3 +183,30 @@ def test_bad_arguments():
         build_library([], progress=False)
     with pytest.raises(ValueError, match="model must be one of"):
         build_library({"x": None}, model="nonsense", progress=False)
+
+
+def test_a_base_library_serves_later_builds(simulated):
+    """The white and black fitted once (a base library) and shared: a later build fits only the
+    pigment its films add, keeps the base's draws for the base pigments, and recovers the truth."""
+    sets, measured, _ = simulated
+    options = {"seed": 5, "progress": False, "eps": EPS, "settings": QUICK, "densities": DENSITIES}
+    base = build_library({f: sets[f] for f in ("W", "WB1", "WB2")}, thickness={f: measured[f] for f in ("W", "WB1", "WB2")},
+                         **options)
+    assert set(base.pigments) == {"White", "Black"}
+    red_films = ("R", "RW1", "RW2", "RB")
+    library = build_library({f: sets[f] for f in red_films}, thickness={f: measured[f] for f in red_films}, base=base,
+                            **options)
+    assert library.pigments[0] == "Red" and set(library.pigments) == {"Red", "White", "Black"}
+    n = library.constants.shape[0]
+    for pigment in ("White", "Black"):
+        np.testing.assert_array_equal(library.constants[:, :, library.pigments.index(pigment)],
+                                      base.constants[:n, :, base.pigments.index(pigment)])
+    assert [sorted(s["pigments"]) for s in library.stages] == [["Red"], ["Black", "White"]]
+    a, sigma = TRUTH["Red"]
+    inside = []
+    for c, truth in enumerate((a, np.log(sigma))):
+        low, high = np.quantile(library.constants[:, :, 0, c], [0.01, 0.99], axis=0)
+        inside.extend((low <= truth) & (truth <= high))
+    assert sum(inside) >= len(inside) - 1, inside
+    with pytest.raises(ValueError, match="base is a 'radiative-transfer' library; this build is 'kubelka-munk'"):
+        build_library({"R": sets["R"]}, base=base, model="kubelka-munk", progress=False)

@@ -87,8 +87,10 @@ def test_region_grows_with_the_model_error_and_is_seeded():
 
 @pytest.mark.parametrize("recipe, message", [
     ({"Vermillion": 1.0}, "recipe: pigment 'Vermillion' is not in the library"),
-    ({"ZincWhite": -1.0, "PrussianBlue": 2.0}, "ZincWhite"),
-    ({"ZincWhite": 0.0}, "ZincWhite"),
+    ({"ZincWhite": -1.0, "PrussianBlue": 2.0},
+     r"recipe: the amount of 'ZincWhite' is negative \(-1\); amounts are >= 0"),
+    ({"ZincWhite": float("nan")}, "recipe: the amount of 'ZincWhite' is NaN; give a number >= 0"),
+    ({"ZincWhite": 0.0}, "recipe: all amounts are zero; a film needs at least one pigment"),
 ])
 def test_bad_recipes_are_refused(recipe, message):
     with pytest.raises(ValueError, match=message):
