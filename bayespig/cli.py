@@ -233,7 +233,7 @@ def _simulate(args):
 
 def build_parser():
     """The argument parser of the ``bayespig`` command."""
-    from .commands import compare, design, infer, report, revigo, robustness
+    from .commands import compare, design, infer, library, report, revigo, robustness
     from .instruments import BUILT_IN_INSTRUMENTS
 
     parser = argparse.ArgumentParser(prog="bayespig", description=__doc__,
@@ -307,6 +307,7 @@ def build_parser():
     compare.add_compare_parser(sub)
     design.add_design_parser(sub)
     revigo.add_revigo_parser(sub)
+    library.add_library_parsers(sub)
     return parser
 
 

@@ -96,13 +96,13 @@ def pigment_report(library, pigment):
              f"Library: {library.model} film model, {len(library.pigments)} pigments, "
              f"{wl.size} wavelengths ({wl[0]:g}-{wl[-1]:g} nm), {library.constants.shape[0]} posterior draws.", ""]
     if stage:
-        fixed = [p for p in stage.get("fixed", ()) if p != pigment]
-        lines += [f"Fitted in stage {stage.get('stage', '?')} with {', '.join(stage.get('pigments', ()))}"
-                  + (f", given {', '.join(fixed)} from earlier stages (fixed at their medians)" if fixed else "")
-                  + f": {stage.get('steps', '?')} steps"
-                  + (" (capped: not converged)" if stage.get("capped") else "")
-                  + (f", R-hat max {stage['rhat_max']:.3f}" if "rhat_max" in stage else "")
-                  + (f", ESS min {stage['ess_min']:.0f}" if "ess_min" in stage else "") + ".", ""]
+        rhat = max(stage.get("thickness_rhat_max", np.nan), stage.get("constants_rhat_max", np.nan))
+        lines += [f"Fitted in stage {stage.get('stage', '?')} with {', '.join(stage.get('pigments', ()))} from "
+                  f"{len(stage.get('films', ()))} films (pigments of earlier stages fixed at their medians): "
+                  f"{stage.get('n_steps', '?')} steps"
+                  + (" (capped: NOT converged)" if stage.get("max_steps_reached") else "")
+                  + f", R-hat <= {rhat:.3f}, ESS >= {stage.get('constants_ess_min', np.nan):.0f} (constants), "
+                  f"{stage.get('thickness_ess_min', np.nan):.0f} (thicknesses).", ""]
     lines += [f"![constants]({name}.png)", "", "## Constants (median and 90 % interval)", "",
               "| wavelength [nm] | " + " | ".join(label for label, _, _ in constants) + " | correlation |",
               "|---|---|---|---|"]
@@ -122,8 +122,10 @@ def pigment_report(library, pigment):
         for f in films:
             recipe = ", ".join(f"{p} {w:.3g}" for p, w in f.get("recipe", {}).items())
             h = (f"{f['thickness_median']:.3g} [{f['thickness_q05']:.3g}, {f['thickness_q95']:.3g}]"
-                 if np.isfinite(f.get("thickness_median", np.nan)) else "opaque")
-            lines.append(f"| {f['id']} | {recipe} | {f.get('stage', '')} | {h} | {f.get('rms_log_deviation', np.nan):.3g} |")
+                 if f.get("thickness_median") is not None else "—")
+            rms = f.get("rms_log_deviation")
+            lines.append(f"| {f['id']} | {recipe} | {f.get('stage', '')} | {h} | "
+                         f"{'—' if rms is None else format(rms, '.3g')} |")
     else:
         lines.append("No film of the library contains it.")
     lines += ["", _provenance(library), ""]

@@ -51,6 +51,7 @@ from scipy import optimize
 from .. import colorimetry
 from .._pool import executor_or_local_pool
 from ..data.spectral_table import read_revigo
+from ..inference.settings import InferenceSettings
 from ..library.build import build_library
 from ..library.match import match_paint
 from ..library.predict import model_error_from_residuals, predict_reflectance
@@ -80,6 +81,10 @@ INSTRUMENT = "8d-sce"
 LEVEL = 0.9
 #: Draws of each prediction.
 N_DRAWS = 200
+#: Sampler settings of the leave-one-out builds: shorter runs than a library's default (ESS 100
+#: per coordinate instead of 400, 64 stored draws per chain): ~120 builds must fit in an
+#: afternoon, and a prediction uses the constants' median and a few hundred draws.
+LOO_SETTINGS = InferenceSettings(target_ess=100.0, draws_per_chain=64, max_steps=6000)
 #: Relative thickness search range of the fitted-thickness variant.
 THICKNESS_RANGE = (1e-2, 1e2)
 #: The goal of the issue: bayespig's median ΔE00 at most this share of Kubelka-Munk's per class.
@@ -176,18 +181,20 @@ def _fit_thickness(library, recipe, constants, cards, measured):
 
 def _build(task):
     """A library of ``films`` (a process task), on a base library when given."""
-    path, films, model, seed, base = task
+    path, films, model, seed, base, settings = task
     sets = read_revigo(path)
-    return build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base)
+    return build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base,
+                         settings=settings)
 
 
 def _predict_film(task):
     """Build the leave-one-out library of one target and predict it (one process task)."""
-    path, film_id, model, seed, n_draws, films, base = task
+    path, film_id, model, seed, n_draws, films, base, settings = task
     started = time.perf_counter()
     sets = read_revigo(path)
     recipes = film_recipes(sets)
-    library = build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base)
+    library = build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base,
+                            settings=settings)
     recipe = recipes[film_id]
     card_b, card_w, over_b, over_w = _spectra(sets[film_id], film_id)
     cards, measured = (card_b, card_w), np.stack([over_b, over_w])
@@ -265,7 +272,7 @@ def _coverage(predictions, wavelength_nm, seed):
 
 
 def colour_prediction_study(path, *, films=None, models=MODELS, seed=0, executor=None, progress=None,
-                            n_draws=N_DRAWS):
+                            n_draws=N_DRAWS, settings=LOO_SETTINGS):
     """Run the leave-one-film-out study (see the module docstring).
 
     Parameters
@@ -299,7 +306,7 @@ def colour_prediction_study(path, *, films=None, models=MODELS, seed=0, executor
         # the base libraries (white and black from their own films), once per model
         plans = {f: training_films(recipes, f) for f in targets}
         base_films = sorted({g for base_only, _ in plans.values() for g in base_only})
-        bases = {m: pool.submit(_build, (str(path), base_films, m, seed, None)) for m in models}
+        bases = {m: pool.submit(_build, (str(path), base_films, m, seed, None, settings)) for m in models}
         bases = {m: future.result() for m, future in bases.items()}
         say(f"base libraries ({', '.join(base_films)}) built: {time.perf_counter() - started:.0f} s")
         tasks = []
@@ -307,9 +314,9 @@ def colour_prediction_study(path, *, films=None, models=MODELS, seed=0, executor
             for f in targets:
                 base_only, others = plans[f]
                 if others:  # the base films are all there (the target is not one): share the base library
-                    tasks.append((str(path), f, m, seed, n_draws, others, bases[m]))
+                    tasks.append((str(path), f, m, seed, n_draws, others, bases[m], settings))
                 else:  # a base-only target: its library is built without it from the others
-                    tasks.append((str(path), f, m, seed, n_draws, base_only, None))
+                    tasks.append((str(path), f, m, seed, n_draws, base_only, None, settings))
         futures = [pool.submit(_predict_film, task) for task in tasks]
         for i, future in enumerate(futures, 1):
             p = future.result()
@@ -318,9 +325,10 @@ def colour_prediction_study(path, *, films=None, models=MODELS, seed=0, executor
                 f"(black / white), {p.seconds:.0f} s; {time.perf_counter() - started:.0f} s in all")
     wl = sets[targets[0]].wavelength_nm if targets else np.array([])
     coverage, inside, radius = _coverage(results, wl, seed)
-    settings = {"seed": seed, "n_draws": n_draws, "instrument": INSTRUMENT, "level": LEVEL, "models": list(models),
-                "thickness_range": list(THICKNESS_RANGE)}
-    return ColourPredictionStudy(tuple(results), coverage, inside, radius, np.asarray(wl), settings)
+    record = {"seed": seed, "n_draws": n_draws, "instrument": INSTRUMENT, "level": LEVEL, "models": list(models),
+              "thickness_range": list(THICKNESS_RANGE), "sampler": dataclasses.asdict(settings),
+              "seconds": time.perf_counter() - started, "base_films": base_films}
+    return ColourPredictionStudy(tuple(results), coverage, inside, radius, np.asarray(wl), record)
 
 
 def _median(values):
