@@ -43,7 +43,7 @@ import numpy as np
 
 from ._validation import broadcast, real_array
 from .instruments import Instrument
-from .physics.forward import specular_transmittance
+from .physics.forward import specular_transmittance, surface_roughness
 
 __all__ = [
     "METHODS",
@@ -444,23 +444,38 @@ class ForwardModel:
     tables : dict, optional
         Instrument name or Instrument -> table; loaded with
         :func:`bayespig.load_table` when missing.
+    roughness : float
+        GGX ``alpha`` of the films' top surface [-]. 0 (the default) is the smooth surface and
+        the smooth tables, exactly as before. A value > 0 takes the rough-surface tables
+        (:func:`bayespig.rough_table.load_rough_table`, opaque films and isotropic scattering
+        only, the roughness in their range), held in ``tables`` under ``("rough",
+        instrument)`` and, at this roughness, under the instrument
+        (:class:`~bayespig.rough_table.FixedRoughnessTable`); :class:`WavelengthModel` then
+        also takes a roughness per row.
     """
 
     problem: Problem
     g: str = "isotropic"
     tables: dict = field(default_factory=dict)
+    roughness: float = 0.0
 
     def __post_init__(self):
         from .table import load_table
 
         if self.g not in ("isotropic", "free"):
             raise ValueError(f"g must be 'isotropic' or 'free', got {self.g!r}")
+        self.roughness = surface_roughness(self.roughness)
+        if self.rough:
+            self._rough_tables()
+            return
         self._film_tables = []
         for film in self.problem.films:
             if film.kind == "transmittance":
                 self._film_tables.append(None)
                 continue
             table = self.tables.get(film.instrument) or self.tables.get(film.instrument.name)
+            if getattr(table, "roughness", 0.0):
+                table = None  # a rough table at the instrument's key: not for the smooth model
             if table is None:
                 table = load_table(film.instrument, g=self.g, n=self.problem.n, progress=False)
                 self.tables[film.instrument] = table
@@ -470,6 +485,44 @@ class ForwardModel:
             self._film_tables.append(table)
         self.table_keys = tuple(sorted({t.key for t in self._film_tables if t is not None}))
         self._stencils = {}
+
+    @property
+    def rough(self):
+        """Whether the films' surface is rough (``roughness > 0``: the rough-surface tables)."""
+        return self.roughness > 0.0
+
+    def _rough_tables(self):
+        """The rough-surface tables of every film at :attr:`roughness` (opaque films only)."""
+        from .rough_table import FixedRoughnessTable, load_rough_table
+
+        if self.g != "isotropic":
+            raise ValueError("roughness > 0 needs g='isotropic' (the look-up tables of a rough surface are "
+                             "isotropic)")
+        self._film_tables, self._rough = [], []
+        for film in self.problem.films:
+            if film.kind == "transmittance" or not film.opaque:
+                raise ValueError(f"film {film.name!r} does not hide its substrate: roughness > 0 is available "
+                                 "for opaque films only (the look-up tables of a rough surface have no tau "
+                                 "axis yet); use roughness=0 for this set")
+            rough = self.tables.get(("rough", film.instrument))
+            if rough is None:
+                rough = load_rough_table(film.instrument, n=self.problem.n, progress=False)
+                self.tables[("rough", film.instrument)] = rough
+            table = self.tables.get(film.instrument)
+            if getattr(table, "roughness", None) != self.roughness or getattr(table, "rough", None) is not rough:
+                table = FixedRoughnessTable(rough, self.roughness)
+                self.tables[film.instrument] = table
+            self._film_tables.append(table)
+            self._rough.append(rough)
+        self.table_keys = tuple(sorted({t.key for t in self._film_tables}))
+        self._stencils = {}
+
+    @property
+    def roughness_range(self):
+        """``(alpha_min, alpha_max)`` the rough tables of every film cover (None for a smooth model)."""
+        if not self.rough:
+            return None
+        return (max(t.alpha_min for t in self._rough), min(t.alpha_max for t in self._rough))
 
     @property
     def film_tables(self):
@@ -598,6 +651,7 @@ class WavelengthModel:
         self.index = int(indices[0]) if np.ndim(index) == 0 else None
         self.n_values = problem.n_values
         self._units = {}
+        self._rough_units = {}  # rough table key -> (RoughLookupTable, value slices of its films)
         self._film_of_part = {}  # first value index -> index among the reflectance films
         self._transmittance = []
         self._t_normal = float(specular_transmittance(0.0, problem.n))
@@ -609,13 +663,16 @@ class WavelengthModel:
                 self._transmittance.append((slice(start, stop), column))
             else:
                 stencil = model._stencil_table(table)
+                if model.rough:
+                    self._rough_units.setdefault(table.rough.key, (table.rough, []))[1].append(
+                        slice(start, stop))
                 unit = self._units.setdefault((table.key, column), (stencil, column, []))
                 unit[2].append((slice(start, stop), np.asarray(film.r_s, dtype=float)[self.indices]))
                 self._film_of_part[start] = len(self._film_of_part)
             start = stop
         self._tau_min = min([u[0].tau_min for u in self._units.values() if u[1] >= 0], default=0.0)
 
-    def __call__(self, a, tau, g=None, r_s_scale=None, member=None):
+    def __call__(self, a, tau, g=None, r_s_scale=None, member=None, roughness=None):
         """Predicted values, shape (W, n_values).
 
         Parameters
@@ -633,7 +690,14 @@ class WavelengthModel:
         member : numpy.ndarray of int, optional
             Shape (W,): position in the stack of wavelengths of every row (required for a
             stack, None for a single wavelength).
+        roughness : numpy.ndarray, optional
+            Shape (W,) or (W, 1): GGX ``alpha`` of the films' surface per row [-] (one surface
+            for every film of the set; the roughness as a parameter, see
+            :mod:`bayespig.inference.roughness`), in the rough tables' range; None for the
+            model's own :attr:`ForwardModel.roughness`. Needs a rough model (``roughness > 0``).
         """
+        if roughness is not None:
+            return self._call_rough(a, roughness, member)
         a = np.asarray(a, dtype=float)
         tau = np.asarray(tau, dtype=float).reshape(a.shape[0], -1)
         g = None if g is None else np.asarray(g, dtype=float)
@@ -673,6 +737,32 @@ class WavelengthModel:
                 else:
                     out[rows] = self._predict_scaled(self.indices[position], a[rows], tau[rows], g_rows,
                                                      r_s_scale[rows])
+        return out
+
+    def _call_rough(self, a, roughness, member):
+        """Predictions with a roughness per row (opaque films under a rough surface)."""
+        if not self.model.rough:
+            raise ValueError("roughness per row needs a ForwardModel with roughness > 0 (the look-up tables "
+                             "of a rough surface)")
+        a = np.asarray(a, dtype=float)
+        alpha = np.asarray(roughness, dtype=float).reshape(a.shape[0], -1)
+        if alpha.shape[1] != 1:
+            raise ValueError(f"roughness must have one value per row, shape ({a.shape[0]},) or "
+                             f"({a.shape[0]}, 1), got {np.shape(roughness)}")
+        alpha = alpha[:, 0]
+        _stack_members(member, a.shape[0], self.indices.size)
+        out = np.empty((a.shape[0], self.n_values)) if len(self._rough_units) > 1 or any(
+            len(parts) > 1 for _, parts in self._rough_units.values()) else None
+        # the lobe depends on the roughness alone: once per distinct value (one per walker)
+        distinct, inverse = np.unique(alpha, return_inverse=True)
+        units = list(self._rough_units.values())
+        for rough, parts in units:
+            values = rough.body(a, alpha)
+            values += rough.lobe(distinct)[inverse.ravel()]
+            if len(units) == 1 and len(parts) == 1 and parts[0] == slice(0, self.n_values):
+                return values  # one film: no copy
+            for part in parts:
+                out[:, part] = values
         return out
 
     def _predict_scaled(self, index, a, tau, g, r_s_scale):

@@ -59,6 +59,10 @@ def add_infer_parser(subparsers):
                         help="additive noise floor of every value, in the values' units (1/sr for BRDF): a "
                              "number >= 0 or 'infer' (one per wavelength); with a floor, zero readings are data "
                              "(default: none, eq. 7 alone)")
+    parser.add_argument("--roughness", default=None, metavar="free|NUMBER",
+                        help="GGX roughness alpha of the films' top surface: 'free' (inferred, shared by all "
+                             "wavelengths) or a number (fixed; 0 = smooth). Default: free for a set of opaque "
+                             "films with BRDF channels, else 0")
     parser.add_argument("--exclude-mirror", type=float, default=None, metavar="DEG",
                         help="drop the films' geometries within DEG degrees of the mirror direction")
     parser.add_argument("--max-angle", type=float, default=None, metavar="DEG",
@@ -100,6 +104,22 @@ def _noise_floor_argument(text):
     return _number_or_infer(text, "--noise-floor", noise_floor_argument)
 
 
+def _roughness_argument(text):
+    """``--roughness`` text -> ``"free"``, a number >= 0, or None (not given)."""
+    from ..inference.roughness import roughness_argument
+
+    if text is None:
+        return None
+    try:
+        value = text if text.strip() == "free" else float(text)
+    except ValueError:
+        value = text
+    try:
+        return roughness_argument(value, name="--roughness")
+    except (TypeError, ValueError) as error:
+        raise ValueError(str(error)) from None
+
+
 def _wavelengths_argument(text):
     """``(wavelengths, wavelength_range)`` from ``--wavelengths``: ``LOW-HIGH`` or ``W1,W2,...`` [nm]."""
     if text is None:
@@ -129,6 +149,7 @@ def run_infer(args):
 
     eps = eps_argument(args.eps)
     noise_floor = _noise_floor_argument(args.noise_floor)
+    roughness = _roughness_argument(args.roughness)
     wavelengths, wavelength_range = _wavelengths_argument(args.wavelengths)
     overrides = {name: value for name, value in (("n_walkers", args.walkers),
                                                  ("n_ensembles", args.ensembles),
@@ -145,7 +166,7 @@ def run_infer(args):
         warnings.simplefilter("always", ConvergenceWarning)
         idata = infer(measurements, method=args.method, seed=args.seed,
                       g=args.g, eps=eps, progress=not args.no_progress, settings=settings,
-                      substrate_sd=args.substrate_sd, noise_floor=noise_floor,
+                      substrate_sd=args.substrate_sd, noise_floor=noise_floor, roughness=roughness,
                       exclude_mirror_deg=args.exclude_mirror, max_angle_deg=args.max_angle,
                       wavelengths=wavelengths, wavelength_range=wavelength_range)
         flagged = diagnose(idata, warn=False)
@@ -167,6 +188,13 @@ def run_infer(args):
     for factor in card_factors(idata):
         print(f"card {factor['card']}: r_s factor {factor['median']:.3f} [{factor['low']:.3f}, "
               f"{factor['high']:.3f}] (90 %; prior sd {factor['relative_sd']:g} in log f)")
+    if "roughness" in idata.posterior:
+        alpha = np.asarray(idata.posterior["roughness"].values, dtype=float).ravel()
+        low, median, high = np.quantile(alpha, [0.05, 0.5, 0.95])
+        print(f"surface roughness alpha {median:.4g} [{low:.4g}, {high:.4g}] (90 %; prior log-uniform on the "
+              "rough tables' range)")
+    elif idata.posterior.attrs.get("roughness_mode") == "fixed":
+        print(f"surface roughness alpha {idata.posterior.attrs['roughness']:g} (fixed)")
     print(f"wrote {posterior_path} and {summary_path}")
     sys.stdout.flush()
     untestable = np.flatnonzero(~check["testable"] & ~check["flagged"])

@@ -17,6 +17,7 @@ from ..likelihood import (
     check_observed,
     multiplicative_normal_logpdf,
 )
+from ..rough_table import ROUGHNESS_MAX, ROUGHNESS_MIN
 from ..selection import select_measurements
 from .arguments import (
     DEFAULT_EPS,
@@ -35,6 +36,13 @@ from .arguments import (
 from .card_factors import CardFactors, card_indices
 from .executors import _WORKER_TABLES, _Task, run_tasks
 from .outputs import _inference_data
+from .roughness import (
+    PILOT_DRAWS_PER_CHAIN,
+    NoiseFloorFilmLayout,
+    RoughnessSpec,
+    roughness_argument,
+    sample_roughness,
+)
 from .settings import ConvergenceWarning
 from .shared import pilot_draws, sample_joint
 
@@ -170,28 +178,52 @@ def _point_starts(problem, g, tables, priors, log_post0, n_wavelengths):
     return np.concatenate(columns, axis=1), fit
 
 
-def _sample_shared(problem, model, priors, eps, settings, seed, specs, executor, progress):
+def _pilot_blocks(pilot, problem, floored):
+    """Every pooled draw ``[a, log tau_1..G, (log noise_floor)]`` per wavelength of a pilot run,
+    (n_draws, n_wl, k) (:func:`~bayespig.inference.shared.pilot_draws`, also for opaque films only)."""
+    if problem.groups:
+        draws = pilot_draws(pilot)
+    else:
+        draws = np.asarray(pilot.posterior["a"].values, dtype=float)[..., None]
+        draws = draws.reshape(-1, *draws.shape[2:])
+    if floored:
+        floor = np.log(np.asarray(pilot.posterior["noise_floor"].values, dtype=float))
+        draws = np.concatenate([draws, floor.reshape(-1, floor.shape[-1])[..., None]], axis=-1)
+    return draws
+
+
+def _sample_shared(problem, model, priors, eps, settings, seed, specs, executor, progress, noise_floor=None):
     """Joint run over all wavelengths with the shared parameters ``specs`` (:mod:`bayespig.inference.shared`).
 
     The pilot is a short per-wavelength run of the problem as given (the specs' nominal values,
-    e.g. every card at its stated albedo; :data:`PILOT_TARGET_ESS`). Returns what :func:`~bayespig.inference.shared.sample_joint`
-    returns.
+    e.g. every card at its stated albedo, the model's roughness; :data:`PILOT_TARGET_ESS`).
+    With ``noise_floor="infer"`` the blocks carry one floor per wavelength
+    (:class:`~bayespig.inference.roughness.NoiseFloorFilmLayout`). Returns what
+    :func:`~bayespig.inference.shared.sample_joint` returns.
     """
     pilot_seed, joint_seed, start_seed = np.random.SeedSequence(int(seed)).spawn(3)
     pilot_settings = dataclasses.replace(
         settings, target_ess=min(settings.target_ess, PILOT_TARGET_ESS),
         min_autocorr_multiple=min(settings.min_autocorr_multiple, PILOT_AUTOCORR_MULTIPLE),
         min_steps=min(settings.min_steps, PILOT_MIN_STEPS))
+    floored = noise_floor == "infer"
+    if floored or model.rough:  # the records of the pilot are not kept: few stored draws
+        pilot_settings = dataclasses.replace(
+            pilot_settings, draws_per_chain=min(pilot_settings.draws_per_chain, PILOT_DRAWS_PER_CHAIN))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         pilot = infer_problem(problem, seed=int(pilot_seed.generate_state(1)[0]), g="isotropic", eps=eps,
                               executor=executor, progress=progress, priors=priors, settings=pilot_settings,
-                              tables=model.tables)
-    return sample_joint(model, specs, pilot_draws(pilot), priors, eps, settings, joint_seed, start_seed)
+                              tables=model.tables, noise_floor=noise_floor, roughness=model.roughness)
+    if not floored and problem.groups:  # the card factors' path, as before
+        return sample_joint(model, specs, pilot_draws(pilot), priors, eps, settings, joint_seed, start_seed)
+    layout = NoiseFloorFilmLayout(model, priors, eps) if floored else model
+    return sample_roughness(layout, specs, _pilot_blocks(pilot, problem, floored), settings, joint_seed,
+                            start_seed, priors, eps)
 
 
 def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, progress=True,
-                  priors=None, settings=None, tables=None, shared=None, noise_floor=None):
+                  priors=None, settings=None, tables=None, shared=None, noise_floor=None, roughness=0.0):
     """Posterior samples of a :class:`~bayespig.likelihood.Problem` at every wavelength.
 
     Parameters as :func:`infer`, except ``eps``: a positive number (known, for films without
@@ -199,7 +231,10 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     (instrument -> table) for the point fit and serial runs; ``shared``: parameters shared
     over wavelengths, a sequence of :class:`~bayespig.inference.shared.SharedParameter` specs
     (e.g. :class:`~bayespig.inference.card_factors.CardFactors`), sampled jointly with every
-    wavelength's parameters; ``noise_floor`` as in :func:`infer` (not with ``shared``).
+    wavelength's parameters; ``noise_floor`` as in :func:`infer` (with ``shared``: None or
+    ``"infer"``); ``roughness``: the films' surface roughness, a number >= 0 (0: smooth, the
+    smooth tables; > 0: the rough tables, opaque films only), the nominal value of a
+    :class:`~bayespig.inference.roughness.RoughnessSpec` in ``shared``.
 
     Returns
     -------
@@ -218,13 +253,18 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     priors, settings = check_priors(priors), check_settings(settings)
     noise_floor = noise_floor_argument(noise_floor)
     shared = tuple(shared) if shared is not None else ()
-    if shared and noise_floor is not None:
+    roughness = roughness_argument(roughness)
+    if roughness is None or roughness == "free":
+        raise ValueError(f"roughness must be a number >= 0 for infer_problem, got {roughness!r} (pass a "
+                         "RoughnessSpec in shared= to infer it)")
+    if shared and noise_floor is not None and noise_floor != "infer":
         raise ValueError(f"noise_floor is not available with {' and '.join(spec.title for spec in shared)} "
-                         "(the joint run over all wavelengths has no noise floor yet)")
+                         "(the joint run over all wavelengths infers one floor per band, noise_floor='infer', "
+                         "or has none)")
     check_observed(problem, noise_floor)
     started = time.perf_counter()
     tables = {} if tables is None else tables
-    model = ForwardModel(problem, g=g, tables=tables)
+    model = ForwardModel(problem, g=g, tables=tables, roughness=roughness)
     log_post0 = LogPosterior(model, 0, priors, g=g, eps=eps, noise_floor=noise_floor)
     _check_eps_identifiable(problem, log_post0)
     n_wl = problem.n_wavelengths
@@ -234,23 +274,28 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
         if g != "isotropic" or eps is None:
             raise ValueError(f"{' and '.join(spec.title for spec in shared)} need g='isotropic' and a known eps")
         results, shared_draws, settings, joint = _sample_shared(
-            problem, model, priors, eps, settings, seed, shared, executor, progress)
+            problem, model, priors, eps, settings, seed, shared, executor, progress, noise_floor)
     else:
         seeds = np.random.SeedSequence(int(seed)).spawn(n_wl)
         # the stacks of wavelengths sampled together depend on the settings only (never on the
         # executor), so the samples do not depend on how the tasks are run
         per_run = settings.wavelengths_per_run
         tasks = [_Task(problem, g, eps, priors, settings, tuple(range(i, min(i + per_run, n_wl))),
-                       starts[i:i + per_run], tuple(seeds[i:i + per_run]), noise_floor)
+                       starts[i:i + per_run], tuple(seeds[i:i + per_run]), noise_floor, roughness)
                  for i in range(0, n_wl, per_run)]
         if executor is None and len(tasks) == 1:  # runs here: the tables loaded for the point fit
-            _WORKER_TABLES.setdefault((g, problem.n), {}).update(model.tables)
+            _WORKER_TABLES.setdefault((g, problem.n, roughness), {}).update(model.tables)
         chunks = run_tasks(tasks, executor, progress)
         results = [r for chunk in chunks for r in chunk]
 
     idata = _inference_data(problem, model, results, settings, log_post0, fit, seed=seed, g=g, eps=eps,
                             priors=priors, wall_time=time.perf_counter() - started,
                             shared=list(zip(shared, shared_draws)) if joint is not None else [])
+    inferred = any(isinstance(spec, RoughnessSpec) for spec in shared)
+    for dataset in [idata[group] for group in idata.groups()]:
+        # the surface: "smooth" (roughness 0), "fixed" (the value) or "inferred" (posterior roughness)
+        dataset.attrs["roughness_mode"] = "inferred" if inferred else "fixed" if model.rough else "smooth"
+        dataset.attrs["roughness"] = float("nan") if inferred else float(model.roughness)
     wavelength = np.asarray(problem.wavelength_nm, dtype=float)
     capped = [w for w, r in zip(wavelength, results) if r["max_steps_reached"]]
     if capped and joint is not None:
@@ -268,7 +313,8 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
 
 def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, executor=None,
           progress=True, priors=None, settings=None, substrate_sd=None, noise_floor=None,
-          exclude_mirror_deg=None, max_angle_deg=None, wavelengths=None, wavelength_range=None):
+          exclude_mirror_deg=None, max_angle_deg=None, wavelengths=None, wavelength_range=None,
+          roughness=None):
     """Posterior of ``a`` and ``tau`` (and ``g``, ``eps``) per wavelength from a measurement set.
 
     Parameters
@@ -323,6 +369,17 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         Fit these measured bands only [nm].
     wavelength_range : (float, float), optional
         Fit the bands in ``[low, high]`` only [nm].
+    roughness : {"free"} or float, optional
+        GGX roughness ``alpha`` of the films' top surface (one surface for every film of the
+        set; :mod:`bayespig.physics.rough_surface`). ``"free"``: inferred jointly with every
+        wavelength's parameters (:mod:`bayespig.inference.roughness`: log-uniform prior on the
+        rough tables' range, 0.01 .. 1; the posterior holds ``roughness`` over ``(chain, draw,
+        surface)``; needs ``g="isotropic"`` and a known ``eps``; ``noise_floor`` None or
+        ``"infer"``). A number > 0: fixed at that value. 0: the smooth surface, exactly the
+        smooth model of before. Default (None): ``"free"`` for a set whose films are all opaque
+        and that has BRDF channels (with ``g="isotropic"`` and a known ``eps``), else 0 (sphere-only sets, and films over a visible
+        substrate, for which the rough tables have no ``tau`` axis yet). Rough surfaces need
+        opaque films and isotropic scattering.
 
     Returns
     -------
@@ -362,12 +419,19 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     priors, settings = check_priors(priors), check_settings(settings)
     substrate_sd = check_substrate_sd(substrate_sd)
     noise_floor = noise_floor_argument(noise_floor)
+    roughness = roughness_argument(roughness)
+    if isinstance(roughness, float) and roughness > 0 and not ROUGHNESS_MIN <= roughness <= ROUGHNESS_MAX:
+        raise ValueError(f"roughness {roughness:g} is outside the range of the look-up tables of a rough surface "
+                         f"[{ROUGHNESS_MIN:g}, {ROUGHNESS_MAX:g}] (0 for a smooth surface)")
     if substrate_sd is not None and (g != "isotropic" or eps == "infer"):
         raise ValueError("substrate_sd needs g='isotropic' and a known eps (the joint run over all "
                          "wavelengths does not sample g or eps)")
     if substrate_sd is not None and noise_floor is not None:
         raise ValueError("noise_floor is not available with substrate_sd (the joint run over all "
                          "wavelengths has no noise floor yet)")
+    if roughness == "free" and isinstance(noise_floor, float):
+        raise ValueError(f"roughness='free' needs noise_floor None or 'infer' (the joint run over all wavelengths "
+                         f"infers one floor per band or has none), got {noise_floor!r}")
     selection = {"exclude_mirror_deg": exclude_mirror_deg, "max_angle_deg": max_angle_deg,
                      "wavelengths": wavelengths, "wavelength_range": wavelength_range}
     check_selection(**selection)
@@ -380,10 +444,62 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     measurements = select_measurements(measurements, **selection)
     eps_value, _ = _resolve_eps(eps, measurements)
     problem = Problem.from_measurements(measurements, method)
+    roughness = _resolve_roughness(roughness, problem, g, eps, substrate_sd)
     shared = []
     if substrate_sd is not None:
         cards, card_index = card_indices(measurements, problem)
         shared.append(CardFactors(problem, card_index, substrate_sd, cards))
+    nominal = 0.0
+    if roughness == "free":
+        nominal, alpha_range = _nominal_roughness(problem, priors, noise_floor)
+        shared.append(RoughnessSpec(alpha_range, nominal))
+    else:
+        nominal = roughness
     return infer_problem(problem, seed=seed, g=g, eps=eps_value, executor=executor,
                          progress=progress, priors=priors, settings=settings, shared=shared,
-                         noise_floor=noise_floor)
+                         noise_floor=noise_floor, roughness=nominal)
+
+
+def _has_brdf(problem):
+    """Whether a film of the problem has BRDF channels."""
+    return any(film.instrument is not None and any(ch.kind == "brdf" for ch in film.instrument.channels)
+               for film in problem.films)
+
+
+def _resolve_roughness(roughness, problem, g, eps, substrate_sd):
+    """``"free"`` or a number >= 0 from the ``roughness`` argument (checked) and the set's default."""
+    if roughness is None:
+        opaque = all(film.kind == "reflectance" and film.opaque for film in problem.films)
+        return "free" if opaque and _has_brdf(problem) and g == "isotropic" and eps != "infer" else 0.0
+    if roughness == "free" and (g != "isotropic" or eps == "infer" or substrate_sd is not None):
+        raise ValueError("roughness='free' needs g='isotropic', a known eps and no substrate_sd (the joint "
+                         "run over all wavelengths does not sample g or eps); pass roughness=<number> to "
+                         "fix the roughness")
+    return roughness
+
+
+#: Roughness values of the point-fit scan that picks the pilot's (nominal) roughness, per decade.
+NOMINAL_SCAN_PER_DECADE = 3
+
+
+def _nominal_roughness(problem, priors, noise_floor):
+    """The pilot's roughness: the best of a log-spaced scan by the point fit, and the tables' range.
+
+    At each roughness the point fit (:func:`bayespig.fit.fit_problem`, every wavelength) gives
+    its least-squares cost of the relative deviations; the roughness of the smallest total cost
+    starts the joint run (which then samples the whole prior range).
+    """
+    from ..fit import FitSettings, fit_problem
+
+    tables = {}
+    model = ForwardModel(problem, tables=tables, roughness=ROUGHNESS_MIN)
+    low, high = model.roughness_range
+    fitted = _point_fit_problem(problem) if noise_floor is not None else problem
+    settings = FitSettings(a_bounds=tuple(float(v) for v in priors.a_range))
+    scan = np.geomspace(low, high, round(np.log10(high / low) * NOMINAL_SCAN_PER_DECADE) + 1)
+    costs = []
+    for alpha in scan:
+        ForwardModel(problem, tables=tables, roughness=float(alpha))
+        fit = fit_problem(fitted, g=0.0, tables=tables, settings=settings, warn=False)
+        costs.append(float(np.sum(fit.rms_relative_deviation ** 2)))
+    return float(scan[int(np.argmin(costs))]), (low, high)

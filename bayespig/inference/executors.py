@@ -23,7 +23,7 @@ from .outputs import _wavelength_outputs
 from .sampler import _sample_stack
 from .settings import InferenceSettings
 
-#: Look-up tables per worker process, keyed by (g, n): instrument -> table.
+#: Look-up tables per worker process, keyed by (g, n, roughness): instrument -> table.
 _WORKER_TABLES = {}
 
 
@@ -38,12 +38,13 @@ class _Task:
     starts: np.ndarray  # (len(indices), n_dim)
     seeds: tuple  # SeedSequence per index
     noise_floor: float | str | None = None  # additive floor: None, known, or "infer"
+    roughness: float = 0.0  # GGX alpha of the films' surface (0: smooth, the smooth tables)
 
 
 def _run_task(task):
     """Sample the wavelengths of one task, one stack in one sampler (runs in a worker process)."""
-    tables = _WORKER_TABLES.setdefault((task.g, task.problem.n), {})
-    model = ForwardModel(task.problem, g=task.g, tables=tables)
+    tables = _WORKER_TABLES.setdefault((task.g, task.problem.n, task.roughness), {})
+    model = ForwardModel(task.problem, g=task.g, tables=tables, roughness=task.roughness)
     singles = [LogPosterior(model, index, task.priors, g=task.g, eps=task.eps, noise_floor=task.noise_floor)
                for index in task.indices]
     stacked = LogPosterior(model, list(task.indices), task.priors, g=task.g, eps=task.eps,

@@ -273,6 +273,12 @@ class BlockLayout(abc.ABC):
         (a tuple; default the blocks themselves)."""
         return (theta,)
 
+    def log_density(self, theta, values):
+        """Pointwise log-likelihood (W, n_wavelengths, n_values) of the values predicted from the
+        blocks ``theta`` (W, n_wavelengths, k): eq. (7) with the known ``eps`` by default (a layout
+        with noise parameters in its blocks, e.g. an additive floor, overrides it)."""
+        return multiplicative_normal_logpdf(self.observed, values, self.eps)
+
 
 class FilmLayout(BlockLayout):
     """The block ``[a, log tau_1..G]`` per wavelength of one film problem (its film groups).
@@ -532,8 +538,9 @@ class JointLogPosterior:
 
     def log_likelihood(self, u):
         """Pointwise log-likelihood of eq. (7), shape (W, n_wavelengths, n_values)."""
+        theta, phi = self.theta_of(u)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            return multiplicative_normal_logpdf(self.observed, self.predict(u), self.eps)
+            return self.layout.log_density(self.blocks_of(theta), self._predict_theta(theta, phi))
 
     def wavelength_terms(self, u):
         """Log-likelihood of each wavelength, (W, n_wl); ``-inf`` where its block or ``phi``
@@ -548,8 +555,8 @@ class JointLogPosterior:
         if rows.any():
             safe = np.clip(theta[rows], self.theta_lower, self.theta_upper)
             with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-                values = multiplicative_normal_logpdf(self.observed, self._predict_theta(safe, phi[rows]),
-                                                      self.eps).sum(axis=2)
+                values = self.layout.log_density(self.blocks_of(safe),
+                                                 self._predict_theta(safe, phi[rows])).sum(axis=2)
             values[~np.isfinite(values)] = -np.inf
             terms[rows] = np.where(block_ok[rows], values, -np.inf)
         return terms

@@ -1,0 +1,269 @@
+"""The surface roughness as a parameter shared over wavelengths (issue 16).
+
+A paint's top surface has one roughness ``alpha`` (GGX's alpha of the air/binder interface,
+:mod:`bayespig.physics.rough_surface`) at every wavelength: it couples the wavelengths, so it is
+a spec (:class:`RoughnessSpec`) of the joint machinery for shared parameters
+(:mod:`bayespig.inference.shared`), entering the forward model through the per-row input
+``roughness`` of :class:`bayespig.likelihood.WavelengthModel` (which interpolates the rough
+tables, :mod:`bayespig.rough_table`, along their roughness axis).
+
+Prior
+-----
+One coordinate ``log alpha`` per measurement set (one surface per paint: every film of the set
+is the same paint), **log-uniform** on the rough tables' roughness range
+(:data:`bayespig.rough_table.ROUGHNESS_MIN` .. :data:`~bayespig.rough_table.ROUGHNESS_MAX`,
+0.01 .. 1 by default): the roughness is a scale parameter, from a fine gloss (a lobe ~1 deg wide)
+to a matt surface, and nothing favours one decade over another. It is stored as the posterior
+variable ``roughness`` over ``(chain, draw, surface)``; its prior bounds are recorded with the
+others (``prior_bounds``, scale ``log``), so the prior-edge flags cover it.
+
+Noise floor in the joint run
+----------------------------
+Real gonio data (exact zeros, dark directions) need the additive noise floor of
+:mod:`bayespig.likelihood`. :class:`NoiseFloorFilmLayout` is the film layout
+(:class:`bayespig.inference.shared.FilmLayout`) with one more coordinate per wavelength,
+``log sigma0`` (log-uniform on ``priors.noise_floor_range``, as in the per-wavelength runs), and
+the likelihood ``N(x_obs | x, (eps x)^2 + sigma0^2)`` (the layout's ``log_density``).
+:func:`sample_roughness` runs it (or the plain film layout) and returns the per-wavelength
+records of :func:`bayespig.inference.shared.sample_joint`, with the floor's draws.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .outputs import STORED_DRAW_DTYPE
+from .shared import FilmLayout, SharedParameter, sample_blocks
+
+_LOG_2PI = float(np.log(2.0 * np.pi))
+
+__all__ = ["ROUGHNESS_START_SD", "NoiseFloorFilmLayout", "RoughnessSpec", "roughness_argument",
+           "sample_roughness"]
+
+#: Values (draws x bands x geometries) computed at once for the records of :func:`sample_roughness`.
+RECORD_VALUES = 2**23
+#: Draws per chain kept by the pilot of a roughness or noise-floor joint run: it only gives the
+#: blocks' medians and start points, and its stored per-draw predictions would be most of the memory.
+PILOT_DRAWS_PER_CHAIN = 128
+#: Spread of the walkers' start around the nominal ``log alpha`` [-].
+ROUGHNESS_START_SD = 0.02
+
+
+def roughness_argument(roughness, name="roughness"):
+    """``roughness`` checked: ``"free"``, None (the default for the set), or a number >= 0.
+
+    Returns
+    -------
+    None, "free" or float
+
+    Raises
+    ------
+    TypeError, ValueError
+        Naming ``name``, for anything else.
+    """
+    expected = ("'free' (inferred), or a number >= 0 (the GGX alpha of the top surface, fixed; "
+                "0 for a smooth surface)")
+    if roughness is None:
+        return None
+    if isinstance(roughness, str):
+        if roughness.strip() != "free":
+            raise ValueError(f"{name} must be {expected}, got {roughness!r}")
+        return "free"
+    if isinstance(roughness, (bool, np.bool_)) or not isinstance(roughness, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be {expected}, got {type(roughness).__name__} {roughness!r}")
+    value = float(roughness)
+    if not (np.isfinite(value) and value >= 0):
+        raise ValueError(f"{name} must be {expected}, got {roughness!r}")
+    return value
+
+
+class RoughnessSpec(SharedParameter):
+    """One roughness ``alpha`` for every film of a set: a spec of :mod:`bayespig.inference.shared`.
+
+    Parameters
+    ----------
+    alpha_range : (float, float)
+        Support of the log-uniform prior [-] (the rough tables' range).
+    nominal : float
+        Roughness of the pilot run [-] (the forward model's own), inside ``alpha_range``.
+    label : str
+        Name of the surface (the coordinate of the dimension ``surface``).
+    """
+
+    title = "surface roughness"
+    variable = "roughness"
+    dimension = "surface"
+    long_name = "GGX roughness alpha of the films' top surface"
+    units = "1"
+    coordinate_name = "log_roughness"
+    attribute = "roughness_prior"
+    prior_scale = "log"
+
+    def __init__(self, alpha_range, nominal, label="surface"):
+        low, high = (float(v) for v in alpha_range)
+        if not (0.0 < low < high and np.isfinite(high)):
+            raise ValueError(f"alpha_range must be (low, high) with 0 < low < high, got {alpha_range!r}")
+        if not low <= float(nominal) <= high:
+            raise ValueError(f"nominal roughness {nominal!r} must lie in alpha_range {alpha_range!r}")
+        self.alpha_range = (low, high)
+        self.labels = (str(label),)
+        self.lower = np.array([np.log(low)])
+        self.upper = np.array([np.log(high)])
+        self.nominal = np.array([np.log(float(nominal))])
+        self.start_sd = np.array([ROUGHNESS_START_SD])
+
+    def log_prior(self, x):
+        """Log-uniform in ``alpha``: flat in the sampled ``log alpha`` (0 inside the box), (W,)."""
+        return np.zeros(np.shape(x)[0])
+
+    def physical(self, x):
+        """``alpha = exp(log alpha)``."""
+        return np.exp(x)
+
+    def model_inputs(self, x):
+        """``roughness``: every row's ``alpha``, (W,)."""
+        return {"roughness": np.exp(np.asarray(x)[:, 0])}
+
+    def describe_prior(self):
+        """The prior as text (provenance)."""
+        return (f"log-uniform on [{self.alpha_range[0]:g}, {self.alpha_range[1]:g}] "
+                "(the rough look-up tables' range), one alpha for every film of the set")
+
+    def describe(self):
+        """Range, label and prior (the ``roughness_prior`` attribute)."""
+        return {"alpha_range": list(self.alpha_range), "surfaces": list(self.labels),
+                "nominal": float(np.exp(self.nominal[0])), "prior": self.describe_prior()}
+
+
+class NoiseFloorFilmLayout(FilmLayout):
+    """The film layout with an inferred additive noise floor per wavelength.
+
+    Blocks ``[a, log tau_1..G, log sigma0]``; flat order ``[a (n_wl), log tau (n_wl * G),
+    log sigma0 (n_wl)]``; likelihood ``N(x_obs | x, (eps x)^2 + sigma0^2)``.
+
+    Parameters
+    ----------
+    model : ForwardModel
+    priors : Priors
+        ``noise_floor_range`` is the floor's log-uniform support.
+    eps : float
+        Known relative error for films without their own [-].
+    """
+
+    def __init__(self, model, priors, eps):
+        super().__init__(model, priors, eps)
+        self.names = self.names + ("log_noise_floor",)
+        n_wl = self.n_wavelengths
+        low, high = (np.log(float(v)) for v in priors.noise_floor_range)
+        self.lower = np.concatenate([self.lower, np.full((n_wl, 1), low)], axis=1)
+        self.upper = np.concatenate([self.upper, np.full((n_wl, 1), high)], axis=1)
+
+    @property
+    def flat_index(self):
+        """``[a (n_wl), log tau (n_wl * G), log sigma0 (n_wl)]``."""
+        n_wl, G = self.n_wavelengths, self.n_groups
+        film = super().flat_index
+        return np.concatenate([film, (n_wl * (1 + G) + np.arange(n_wl))[:, None]], axis=1)
+
+    @property
+    def parameter_names(self):
+        """Those of the film layout, then ``r_log_noise_floor[w]``."""
+        return super().parameter_names + tuple(f"r_log_noise_floor[{w:g}]" for w in self.wavelength_nm)
+
+    def predict(self, theta, inputs):
+        """The film values from the blocks without their floor, (W, n_wl, n_values)."""
+        return super().predict(theta[..., :-1], inputs)
+
+    def unpack(self, theta):
+        """``a`` (W, n_wl) and ``tau`` (W, n_wl, G) (the floor: :meth:`noise_floor_of`)."""
+        return super().unpack(theta[..., :-1])
+
+    def noise_floor_of(self, theta):
+        """The floor ``sigma0`` of every block (W, n_wl) [units of the values]."""
+        return np.exp(theta[..., -1])
+
+    def log_density(self, theta, values):
+        """Pointwise ``log N(x_obs | x, (eps x)^2 + sigma0^2)``, (W, n_wl, n_values).
+
+        :func:`bayespig.likelihood.multiplicative_normal_logpdf` written on the variance (no
+        ``hypot``, in place: this is half the joint run's time on 1439 geometries); the same
+        density to round-off.
+        """
+        floor = self.noise_floor_of(theta)[..., None]
+        variance = np.multiply(values, self.eps)
+        np.multiply(variance, variance, out=variance)
+        variance += floor * floor
+        residual = self.observed - values
+        np.multiply(residual, residual, out=residual)
+        residual /= variance
+        np.log(variance, out=variance)
+        residual += variance
+        residual += _LOG_2PI
+        residual *= -0.5
+        return residual
+
+
+def sample_roughness(layout, specs, draws, settings, joint_seed, start_seed, priors, eps):
+    """Joint run of a film layout (with or without a noise floor) and its shared specs.
+
+    :func:`bayespig.inference.shared.sample_blocks`, then the per-wavelength records of
+    :func:`bayespig.inference.shared.sample_joint` (with ``noise_floor`` where the layout has one).
+
+    Returns
+    -------
+    tuple
+        ``(records, shared, settings, joint)`` as :func:`~bayespig.inference.shared.sample_joint`.
+    """
+    run, used, joint = sample_blocks(layout, specs, draws, settings, joint_seed, start_seed, priors, eps)
+    n_wl, G = joint.n_wavelengths, joint.n_groups
+    floored = isinstance(joint.layout, NoiseFloorFilmLayout)
+    theta = run.pop("theta")
+    n_chains, n_draws, n_dim = theta.shape
+    flat = theta.reshape(-1, n_dim)
+    a, tau, *physical = joint.unpack(flat)
+    blocks = joint.blocks_of(joint.theta_of(flat)[0])
+    # per-draw predictions and pointwise log-likelihoods, in blocks of draws and stored in single
+    # precision at once (as the outputs store them): on 1439 geometries x 31 bands x 4096 draws each
+    # is 183 M values, 1.5 GB in double precision
+    N = flat.shape[0]
+    model_values = np.empty((N, n_wl, joint.observed.shape[1]), dtype=STORED_DRAW_DTYPE)
+    pointwise = np.empty_like(model_values)
+    step = max(1, RECORD_VALUES // max(1, n_wl * joint.observed.shape[1]))
+    for start in range(0, N, step):
+        rows = flat[start:start + step]
+        model_values[start:start + step] = joint.predict(rows)
+        pointwise[start:start + step] = joint.log_likelihood(rows)
+    floor = joint.layout.noise_floor_of(blocks) if floored else None
+    noisy = None
+    if used.predictive_noise:
+        rng = np.random.default_rng(run["predictive_seed"])
+        noisy = model_values * (1.0 + joint.eps * rng.standard_normal(model_values.shape))
+        if floored:
+            noisy = noisy + floor[..., None] * rng.standard_normal(model_values.shape)
+    shape = (n_chains, n_draws)
+    autocorr = run["autocorr_time"]
+    records = []
+    for i in range(n_wl):
+        times = [[autocorr[i]], autocorr[n_wl + i * G:n_wl + (i + 1) * G]]
+        if floored:
+            times.append([autocorr[n_wl * (1 + G) + i]])
+        record = {
+            "a": a[:, i].reshape(shape),
+            "tau": tau[:, i].reshape(shape + (G,)),
+            "y": model_values[:, i].reshape(shape + (-1,)),
+            "log_likelihood": pointwise[:, i].reshape(shape + (-1,)),
+            "lp": pointwise[:, i].sum(axis=-1).reshape(shape),
+            "acceptance_rate": run["acceptance_rate"],
+            "autocorr_time": np.concatenate(times),
+            "n_steps": run["n_steps"], "n_burn_in": run["n_burn_in"], "thin": run["thin"],
+            "max_steps_reached": run["max_steps_reached"],
+        }
+        if floored:
+            record["noise_floor"] = floor[:, i].reshape(shape)
+        if noisy is not None:
+            record["y_rep"] = noisy[:, i].reshape(shape + (-1,))
+        records.append(record)
+    shared_autocorr = autocorr[joint.shared_slice]
+    shared = [(values.reshape(shape + (spec.size,)), shared_autocorr[part])
+              for spec, values, part in zip(joint.specs, physical, joint.spec_slices)]
+    return records, shared, used, joint
