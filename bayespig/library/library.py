@@ -55,7 +55,9 @@ class PigmentLibrary:
     densities : dict or None
         Pigment densities given to the build [g/cm^3].
     model_error : numpy.ndarray or None
-        Per-wavelength relative sd of the model error (cross-validation; None until then).
+        The model error learned by cross-validation (:func:`bayespig.library.validation.cross_validate`):
+        the covariance over wavelengths of relative residuals (n_wl, n_wl), or a per-wavelength
+        relative sd (n_wl,); None until then (predictions then hold the constants' uncertainty only).
     provenance : dict
         Seed, settings, package versions, stage plan.
     stages : tuple of dict
@@ -96,12 +98,16 @@ class PigmentLibrary:
             "constants": (("chain", "draw", "wavelength", "pigment", "constant"), self.constants[None]),
             "film_thickness": (("chain", "draw", "film"), self.thickness[None]),
         }
+        coords = {"chain": [0], "draw": np.arange(self.constants.shape[0]), "wavelength": self.wavelength_nm,
+                  "pigment": list(self.pigments), "constant": list(self.constant_names), "film": list(self.film_ids)}
         if self.model_error is not None:
-            data["model_error"] = (("wavelength",), np.asarray(self.model_error, dtype=float))
-        posterior = xr.Dataset(data, coords={
-            "chain": [0], "draw": np.arange(self.constants.shape[0]), "wavelength": self.wavelength_nm,
-            "pigment": list(self.pigments), "constant": list(self.constant_names), "film": list(self.film_ids)},
-            attrs=attrs)
+            error = np.asarray(self.model_error, dtype=float)
+            if error.ndim == 2:  # a covariance over wavelengths
+                data["model_error"] = (("wavelength", "wavelength_other"), error)
+                coords["wavelength_other"] = self.wavelength_nm
+            else:
+                data["model_error"] = (("wavelength",), error)
+        posterior = xr.Dataset(data, coords=coords, attrs=attrs)
         posterior["wavelength"].attrs["units"] = "nm"
         return az.InferenceData(posterior=posterior)
 

@@ -43,25 +43,17 @@ from __future__ import annotations
 
 import dataclasses
 import re
-import time
 
 import numpy as np
-from scipy import optimize
 
-from .. import colorimetry
-from .._pool import executor_or_local_pool
 from ..data.spectral_table import read_revigo
-from ..inference.settings import InferenceSettings
-from ..library.build import build_library
-from ..library.match import match_paint
-from ..library.predict import model_error_from_residuals, predict_reflectance
 from ..library.recipes import film_recipes
+from ..library.validation import LOO_SETTINGS, N_DRAWS, coverage, leave_one_out
 
 __all__ = [
-    "BASE_SERIES",
     "MODELS",
     "ColourPredictionStudy",
-    "FilmPrediction",
+    "film_class",
     "colour_prediction_report",
     "colour_prediction_study",
     "target_films",
@@ -69,8 +61,6 @@ __all__ = [
 
 #: The two film models compared, in the library's names.
 MODELS = ("radiative-transfer", "kubelka-munk")
-#: Series whose films give the base pigments (zinc white and bone black) of every library.
-BASE_SERIES = "07"
 #: The white and the black of the tints and shades.
 WHITE, BLACK = "ZincWhite", "BoneBlack"
 #: Series of the report (the issue: series 01-15).
@@ -79,14 +69,6 @@ SERIES = tuple(f"{i:02d}" for i in range(1, 16))
 INSTRUMENT = "8d-sce"
 #: Probability content of the predictive regions.
 LEVEL = 0.9
-#: Draws of each prediction.
-N_DRAWS = 200
-#: Sampler settings of the leave-one-out builds: shorter runs than a library's default (ESS 100
-#: per coordinate instead of 400, 64 stored draws per chain): ~120 builds must fit in an
-#: afternoon, and a prediction uses the constants' median and a few hundred draws.
-LOO_SETTINGS = InferenceSettings(target_ess=100.0, draws_per_chain=64, max_steps=6000)
-#: Relative thickness search range of the fitted-thickness variant.
-THICKNESS_RANGE = (1e-2, 1e2)
 #: The goal of the issue: bayespig's median ΔE00 at most this share of Kubelka-Munk's per class.
 GOAL_RATIO = 0.8
 #: ... and at most this overall.
@@ -122,115 +104,13 @@ def target_films(sets, recipes, series=SERIES):
     return out
 
 
-def training_films(recipes, target, base_pigments=(WHITE, BLACK)):
-    """Films of ``target``'s leave-one-out library: those made only of its pigments and the base
-    pigments, without it; split into ``(base_only, others)``.
-
-    ``base_only`` are the films of base pigments alone (the base library's films); ``others`` the
-    films that add ``target``'s own pigments (Revigo: the rest of its series).
-    """
-    allowed = set(recipes[target].amounts) | set(base_pigments)
-    films = [f for f in sorted(recipes) if f != target and set(recipes[f].amounts) <= allowed]
-    base_only = tuple(f for f in films if set(recipes[f].amounts) <= set(base_pigments))
-    return base_only, tuple(f for f in films if f not in base_only)
-
-
-def _spectra(ms, film_id):
-    """Measured ``(card_black, card_white, over_black, over_white)`` reflectances [fraction]."""
-    out = []
-    for suffix in ("b", "w", "ob", "ow"):
-        sample = ms.sample(f"{film_id}_{suffix}")
-        out.append(np.asarray(sample.measurements[0].values, dtype=float))
-    return out
-
-
-@dataclasses.dataclass(frozen=True)
-class FilmPrediction:
-    """One held-out film predicted by one model."""
-
-    film_id: str
-    model: str
-    film_class: str
-    recipe: dict
-    thickness: float
-    delta_E: tuple  # (over black, over white), fitted thickness
-    delta_E_unknown: tuple  # (over black, over white), thickness from the library's films
-    residuals: np.ndarray  # (2, n_wl) measured / predicted - 1 (fitted thickness)
-    draws: np.ndarray  # (2, n_draws, n_wl) model spectra of the posterior draws (no model error)
-    measured: np.ndarray  # (2, n_wl)
-    match_fractions: dict
-    match_delta_E: float
-    seconds: float
-    converged: bool
-    worst_band_nm: float
-
-
-def _fit_thickness(library, recipe, constants, cards, measured):
-    """The one free scalar: relative thickness minimising the relative misfit over both cards."""
-    def misfit(log_h):
-        h = np.array([np.exp(log_h)])
-        total = 0.0
-        for card, values in zip(cards, measured):
-            R = predict_reflectance(library, recipe, constants[None], h, instrument=INSTRUMENT, substrate=card)[0]
-            total += float(np.sum((values / R - 1.0) ** 2))
-        return total
-    result = optimize.minimize_scalar(misfit, bounds=np.log(THICKNESS_RANGE), method="bounded",
-                                      options={"xatol": 1e-4})
-    return float(np.exp(result.x))
-
-
-def _build(task):
-    """A library of ``films`` (a process task), on a base library when given."""
-    path, films, model, seed, base, settings = task
-    sets = read_revigo(path)
-    return build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base,
-                         settings=settings)
-
-
-def _predict_film(task):
-    """Build the leave-one-out library of one target and predict it (one process task)."""
-    path, film_id, model, seed, n_draws, films, base, settings = task
-    started = time.perf_counter()
-    sets = read_revigo(path)
-    recipes = film_recipes(sets)
-    library = build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base,
-                            settings=settings)
-    recipe = recipes[film_id]
-    card_b, card_w, over_b, over_w = _spectra(sets[film_id], film_id)
-    cards, measured = (card_b, card_w), np.stack([over_b, over_w])
-    median = np.median(library.constants, axis=0)
-    h = _fit_thickness(library, recipe, median, cards, measured)
-    rng = np.random.default_rng(seed)
-    index = rng.choice(library.constants.shape[0], size=n_draws, replace=n_draws > library.constants.shape[0])
-    draws = library.constants[index]
-    mean, sd = library.thickness_prior
-    h_unknown = np.exp(rng.normal(mean, sd, n_draws))
-    wl = library.wavelength_nm
-    spectra, dE, dE_unknown = [], [], []
-    for card, values in zip(cards, measured):
-        R = predict_reflectance(library, recipe, draws, np.full(n_draws, h), instrument=INSTRUMENT, substrate=card)
-        Ru = predict_reflectance(library, recipe, draws, h_unknown, instrument=INSTRUMENT, substrate=card)
-        spectra.append(R)
-        lab = colorimetry.reflectance_to_Lab(values, wl)
-        dE.append(float(colorimetry.delta_E2000(colorimetry.reflectance_to_Lab(np.median(R, axis=0), wl), lab)))
-        dE_unknown.append(float(colorimetry.delta_E2000(colorimetry.reflectance_to_Lab(np.median(Ru, axis=0), wl),
-                                                        lab)))
-    spectra = np.stack(spectra)
-    residuals = measured / np.median(spectra, axis=1) - 1.0
-    match = match_paint(library, over_w, pigments=tuple(recipe.amounts), instrument=INSTRUMENT, thickness="fit",
-                        substrate=card_w, seed=seed, n_spread=0, n_draws=50)
-    capped = any(stage.get("max_steps_reached") for stage in library.stages)
-    return FilmPrediction(film_id, model, film_class(recipe), dict(recipe.amounts), h, tuple(dE), tuple(dE_unknown),
-                          residuals, spectra, measured, dict(match.recipe.amounts), match.delta_E,
-                          time.perf_counter() - started, not capped,
-                          float(wl[np.argmax(np.abs(residuals).max(axis=0))]))
-
-
 @dataclasses.dataclass(frozen=True)
 class ColourPredictionStudy:
-    """All held-out predictions, with the coverage of the 90 % regions."""
+    """All held-out predictions (:class:`bayespig.library.validation.FilmPrediction`), with the
+    coverage of the 90 % regions."""
 
-    predictions: tuple  # FilmPrediction
+    predictions: tuple
+    classes: dict  # film id -> "white tint" | "black shade"
     coverage: dict  # model -> (inside, total)
     inside: dict  # (model, film_id) -> (bool over black, bool over white)
     radius: dict  # (model, film_id) -> (radius over black, radius over white)
@@ -239,36 +119,6 @@ class ColourPredictionStudy:
 
     def of(self, model):
         return [p for p in self.predictions if p.model == model]
-
-
-def _coverage(predictions, wavelength_nm, seed):
-    """Leave-one-out model-error covariance per film, its 90 % regions and whether they hold the film."""
-    inside, radius, coverage = {}, {}, {}
-    rng = np.random.default_rng(seed)
-    for model in {p.model for p in predictions}:
-        own = [p for p in predictions if p.model == model]
-        hits = total = 0
-        for p in own:
-            others = np.concatenate([q.residuals for q in own if q.film_id != p.film_id])
-            covariance = model_error_from_residuals(others)
-            flags, radii = [], []
-            for k in range(2):
-                R = p.draws[k]
-                noise = rng.multivariate_normal(np.zeros(covariance.shape[0]), covariance, R.shape[0], method="eigh")
-                R = np.clip(R * (1.0 + noise), 0.0, None)
-                lab = colorimetry.reflectance_to_Lab(R, wavelength_nm)
-                centre = colorimetry.reflectance_to_Lab(np.median(R, axis=0), wavelength_nm)
-                r = float(np.quantile(colorimetry.delta_E2000(lab, centre), LEVEL))
-                measured = colorimetry.reflectance_to_Lab(p.measured[k], wavelength_nm)
-                flag = bool(colorimetry.delta_E2000(measured, centre) <= r)
-                flags.append(flag)
-                radii.append(r)
-                hits += flag
-                total += 1
-            inside[(model, p.film_id)] = tuple(flags)
-            radius[(model, p.film_id)] = tuple(radii)
-        coverage[model] = (hits, total)
-    return coverage, inside, radius
 
 
 def colour_prediction_study(path, *, films=None, models=MODELS, seed=0, executor=None, progress=None,
@@ -288,6 +138,8 @@ def colour_prediction_study(path, *, films=None, models=MODELS, seed=0, executor
     progress : callable, optional
         Called with one line per finished film.
     n_draws : int
+    settings : InferenceSettings
+        Sampler settings of every build.
 
     Returns
     -------
@@ -299,36 +151,15 @@ def colour_prediction_study(path, *, films=None, models=MODELS, seed=0, executor
     unknown = [f for f in targets if f not in sets]
     if unknown:
         raise ValueError(f"films: {unknown[0]!r} is not a film of {path}")
-    say = progress or (lambda message: None)
-    started = time.perf_counter()
-    results = []
-    with executor_or_local_pool(executor) as pool:
-        # the base libraries (white and black from their own films), once per model
-        plans = {f: training_films(recipes, f) for f in targets}
-        base_films = sorted({g for base_only, _ in plans.values() for g in base_only})
-        bases = {m: pool.submit(_build, (str(path), base_films, m, seed, None, settings)) for m in models}
-        bases = {m: future.result() for m, future in bases.items()}
-        say(f"base libraries ({', '.join(base_films)}) built: {time.perf_counter() - started:.0f} s")
-        tasks = []
-        for m in models:
-            for f in targets:
-                base_only, others = plans[f]
-                if others:  # the base films are all there (the target is not one): share the base library
-                    tasks.append((str(path), f, m, seed, n_draws, others, bases[m], settings))
-                else:  # a base-only target: its library is built without it from the others
-                    tasks.append((str(path), f, m, seed, n_draws, base_only, None, settings))
-        futures = [pool.submit(_predict_film, task) for task in tasks]
-        for i, future in enumerate(futures, 1):
-            p = future.result()
-            results.append(p)
-            say(f"[{i}/{len(tasks)}] {p.model} {p.film_id}: ΔE00 {p.delta_E[0]:.2f} / {p.delta_E[1]:.2f} "
-                f"(black / white), {p.seconds:.0f} s; {time.perf_counter() - started:.0f} s in all")
-    wl = sets[targets[0]].wavelength_nm if targets else np.array([])
-    coverage, inside, radius = _coverage(results, wl, seed)
+    predictions, info = leave_one_out(sets, targets=targets, models=models, seed=seed, executor=executor,
+                                      progress=progress, n_draws=n_draws, settings=settings,
+                                      base_pigments=(WHITE, BLACK))
+    wl = np.asarray(sets[targets[0]].wavelength_nm, dtype=float) if targets else np.array([])
+    counts, inside, radius = coverage(predictions, wl, level=LEVEL, seed=seed)
     record = {"seed": seed, "n_draws": n_draws, "instrument": INSTRUMENT, "level": LEVEL, "models": list(models),
-              "thickness_range": list(THICKNESS_RANGE), "sampler": dataclasses.asdict(settings),
-              "seconds": time.perf_counter() - started, "base_films": base_films}
-    return ColourPredictionStudy(tuple(results), coverage, inside, radius, np.asarray(wl), record)
+              "sampler": dataclasses.asdict(settings), **info}
+    return ColourPredictionStudy(predictions, {f: film_class(recipes[f]) for f in targets}, counts, inside, radius,
+                                 wl, record)
 
 
 def _median(values):
@@ -341,13 +172,13 @@ def class_medians(study, model, variant="fitted"):
     for cls in ("white tint", "black shade", None):
         values = []
         for p in study.of(model):
-            if cls is None or p.film_class == cls:
+            if cls is None or study.classes.get(p.film_id) == cls:
                 values.extend(p.delta_E if variant == "fitted" else p.delta_E_unknown)
         out[cls or "overall"] = _median(values)
     return out
 
 
-def colour_prediction_report(study, *, command="bayespig study colour-prediction"):
+def colour_prediction_report(study, *, command="bayespig colour-prediction"):
     """The Markdown of ``reports/colour-prediction.md``."""
     rt, km = MODELS
     lines = ["# Colour prediction on real films: bayespig's pigment library against Kubelka-Munk", "",
@@ -386,7 +217,7 @@ def colour_prediction_report(study, *, command="bayespig study colour-prediction
         k = km_of.get(p.film_id)
         recipe = ", ".join(f"{name} {share:.3f}" for name, share in p.recipe.items())
         flags = study.inside.get((rt, p.film_id), (False, False))
-        lines.append(f"| {p.film_id} | {p.film_class} | {recipe} | {p.delta_E[0]:.2f} / {p.delta_E[1]:.2f} | "
+        lines.append(f"| {p.film_id} | {study.classes.get(p.film_id)} | {recipe} | {p.delta_E[0]:.2f} / {p.delta_E[1]:.2f} | "
                      + (f"{k.delta_E[0]:.2f} / {k.delta_E[1]:.2f}" if k else "—")
                      + f" | {p.thickness:.3g} | {'/'.join('yes' if f else 'no' for f in flags)} | {p.worst_band_nm:g} nm |")
     worst = sorted(study.of(rt), key=lambda q: -max(q.delta_E))[:5]
@@ -395,7 +226,7 @@ def colour_prediction_report(study, *, command="bayespig study colour-prediction
         band = p.worst_band_nm
         sign = np.sign(p.residuals[:, np.argmin(np.abs(study.wavelength_nm - band))])
         side = ["darker than predicted" if s < 0 else "lighter than predicted" for s in sign]
-        lines.append(f"- **{p.film_id}** ({p.film_class}, ΔE00 {p.delta_E[0]:.2f} / {p.delta_E[1]:.2f}): the largest "
+        lines.append(f"- **{p.film_id}** ({study.classes.get(p.film_id)}, ΔE00 {p.delta_E[0]:.2f} / {p.delta_E[1]:.2f}): the largest "
                      f"relative residual at {band:g} nm (over black {side[0]}, over white {side[1]}); fitted thickness "
                      f"{p.thickness:.3g}{'; its library did not converge' if not p.converged else ''}.")
     lines += ["", "## Matching", "",

@@ -210,3 +210,28 @@ def test_a_base_library_serves_later_builds(simulated):
     assert sum(inside) >= len(inside) - 1, inside
     with pytest.raises(ValueError, match="base is a 'radiative-transfer' library; this build is 'kubelka-munk'"):
         build_library({"R": sets["R"]}, base=base, model="kubelka-munk", progress=False)
+
+
+def test_cross_validation_learns_a_model_error(simulated):
+    """Leave one film out on simulated films: the held-out films are predicted to within the
+    noise (the model is exact here), and the learned model error is of the noise's size."""
+    from bayespig.library.validation import cross_validate, leave_one_out
+
+    sets, _, _ = simulated
+    films = {f: sets[f] for f in ("W", "WB1", "WB2", "R", "RW1", "RW2", "RB")}
+    predictions, info = leave_one_out(films, targets=["RW2", "RB"], seed=2, settings=QUICK, executor=None,
+                                      base_pigments=["White", "Black"])
+    assert info["base_films"] == ["W", "WB1", "WB2"]
+    assert [p.film_id for p in predictions] == ["RW2", "RB"]
+    for p in predictions:
+        assert p.cards == (f"{p.film_id}_ob_substrate", f"{p.film_id}_ow_substrate") or len(p.cards) == 2
+        # measured = model * (1 + eps xi) with thickness fitted and constants from the other films
+        assert np.abs(p.residuals).max() < 6 * EPS
+        assert max(p.delta_E) < 1.5
+    library = build_library({f: films[f] for f in ("W", "WB1", "WB2", "R", "RW1")}, seed=1, progress=False, eps=EPS,
+                            settings=QUICK, base_pigments=["White", "Black"], densities=DENSITIES)
+    validated, _ = cross_validate(library, {f: films[f] for f in ("W", "WB1", "WB2", "R", "RW1")},
+                                  targets=["WB1", "RW1"], settings=QUICK, executor=None)
+    sd = np.sqrt(np.diag(validated.model_error))
+    assert validated.model_error.shape == (WAVELENGTHS.size,) * 2
+    assert np.all(sd < 6 * EPS) and np.all(sd > 0)
