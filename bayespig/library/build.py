@@ -38,6 +38,14 @@ be fitted worse than their noise: each film's ``rms_log_deviation`` shows it (si
 of ``tau ~ 15`` left a 10 % tint at 5.8 % rms against 1 % noise; at ``tau ~ 7`` all films fit
 to 0.1-1.3 %).
 
+Measured on the 84 Revigo films (``benchmarks/library.py``, 2 cores shared with other work, load
+average 6-9): stage 1 (ZincWhite, BoneBlack from 07A, 07C-07F) needs 19 576 steps (877 s) to
+converge; the 18 groups of stage 2 converge in 656-3 933 steps (25-273 s each; ZincWhiteLinseed,
+one film, reached a 5 000-step cap), 854 s on 2 processes; 9 films unused. The fit is not yet
+good: median rms of ``log(measured / predicted)`` 6 % per film against ``eps = 2 %``, worst
+16A (BariumSulphate masstone, 29 %), 11A, 11D, 14A (20-24 %): the shades and tints of a pigment
+pull against its masstone when the fixed white and black are only their medians.
+
 Start of each run: a per-wavelength least-squares fit of the stage's constants at the nominal
 thicknesses (``h = 1``, or the measured ones; best of a few starts per wavelength), the walkers
 in a small ball (:data:`START_BALL_SD`) around it; the adaptation run of
