@@ -182,6 +182,7 @@ def add_library_parsers(subparsers):
     add_output_argument(study, "--report", kind="file", default="reports/colour-prediction.md",
                         help="Markdown report to write")
     study.add_argument("--films", default=None, help="only these targets (comma-separated ids)")
+    study.add_argument("--series", default=None, help="only the targets of these series (comma-separated, e.g. 06,12)")
     study.add_argument("--seed", type=int, default=0)
     add_verbosity_arguments(study)
     study.set_defaults(func=run_colour_prediction)
@@ -289,8 +290,20 @@ def run_colour_prediction(args):
 
     path = revigo_folder(args.path)
     films = None if args.films is None else [f.strip() for f in args.films.split(",") if f.strip()]
+    command = "bayespig colour-prediction"
+    if args.series is not None:
+        from ..data.spectral_table import read_revigo
+        from ..library.recipes import film_recipes
+        from ..studies.colour_prediction import target_films
+
+        series = [s.strip() for s in args.series.split(",") if s.strip()]
+        sets = read_revigo(path)
+        films = [f for f in target_films(sets, film_recipes(sets)) if f[:2] in series and (films is None or f in films)]
+        if not films:
+            raise ValueError(f"--series {args.series}: no mixture film of series 01-15 among them")
+        command += f" --series {','.join(series)}"
     study = colour_prediction_study(path, films=films, seed=args.seed, progress=_say(args))
-    text = colour_prediction_report(study)
+    text = colour_prediction_report(study, command=command)
     with atomic_path(args.report) as tmp:
         Path(tmp).write_text(text, encoding="utf-8")
     print(f"wrote {args.report}: {len(study.predictions)} predictions")

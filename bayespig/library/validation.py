@@ -30,8 +30,9 @@ from scipy import optimize
 
 from .. import colorimetry
 from .._pool import executor_or_local_pool
+from ..data import MeasurementSet
 from ..inference.settings import InferenceSettings
-from .build import _base_pigments, build_library
+from .build import _base_pigments, _portable as portable_fields, build_library
 from .match import match_paint
 from .predict import DEFAULT_LEVEL, model_error_from_residuals, predict_reflectance
 from .recipes import film_recipes
@@ -119,8 +120,8 @@ def card_spectra(measurements):
             continue
         card = measurements.sample(sample.substrate)
         for m in sample.measurements:
-            instruments.add(m.geometry)
-            match = [c for c in card.measurements if c.geometry == m.geometry]
+            instruments.add(m.label)
+            match = [c for c in card.measurements if c.label == m.label]
             if match:
                 pairs.append((card.name, np.asarray(match[0].values, dtype=float), np.asarray(m.values, dtype=float)))
     if not pairs or len(instruments) != 1:
@@ -158,6 +159,7 @@ def _fit_thickness(library, recipe, constants, instrument, pairs):
 def _build(task):
     """A library of the films ``films`` (a process task), on a base library when given."""
     sets, films, model, seed, base, settings = task
+    sets = _sets({f: sets[f] for f in films})
     return build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base,
                          settings=settings)
 
@@ -174,25 +176,35 @@ def predict_held_out(library, measurements, recipe, *, model, film_id, seed=0, n
     mean, sd = library.thickness_prior
     h_unknown = np.exp(rng.normal(mean, sd, n_draws))
     wl = library.wavelength_nm
+    # colour needs the visible spectrum: with fewer bands only the spectral residuals are scored
+    coloured = wl.size >= colorimetry.MIN_WAVELENGTHS
+
+    def delta_E(R, values):
+        if not coloured:
+            return float("nan")
+        lab = colorimetry.reflectance_to_Lab(values, wl)
+        return float(colorimetry.delta_E2000(colorimetry.reflectance_to_Lab(np.median(R, axis=0), wl), lab))
+
     spectra, dE, dE_unknown = [], [], []
     for _, card, values in pairs:
         R = predict_reflectance(library, recipe, draws, np.full(n_draws, h), instrument=instrument, substrate=card)
         Ru = predict_reflectance(library, recipe, draws, h_unknown, instrument=instrument, substrate=card)
         spectra.append(R)
-        lab = colorimetry.reflectance_to_Lab(values, wl)
-        dE.append(float(colorimetry.delta_E2000(colorimetry.reflectance_to_Lab(np.median(R, axis=0), wl), lab)))
-        dE_unknown.append(float(colorimetry.delta_E2000(colorimetry.reflectance_to_Lab(np.median(Ru, axis=0), wl),
-                                                        lab)))
+        dE.append(delta_E(R, values))
+        dE_unknown.append(delta_E(Ru, values))
     spectra = np.stack(spectra)
     measured = np.stack([values for _, _, values in pairs])
     residuals = measured / np.median(spectra, axis=1) - 1.0
     _, card, values = pairs[-1]
-    match = match_paint(library, values, pigments=tuple(recipe.amounts), instrument=instrument, thickness="fit",
-                        substrate=card, seed=seed, n_spread=0, n_draws=50)
+    fractions, match_dE = {}, float("nan")
+    if coloured:
+        match = match_paint(library, values, pigments=tuple(recipe.amounts), instrument=instrument, thickness="fit",
+                            substrate=card, seed=seed, n_spread=0, n_draws=50)
+        fractions, match_dE = dict(match.recipe.amounts), match.delta_E
     capped = any(stage.get("max_steps_reached") for stage in library.stages)
     return FilmPrediction(film_id, model, dict(recipe.amounts), tuple(name for name, _, _ in pairs), h, tuple(dE),
-                          tuple(dE_unknown), residuals, spectra, measured, dict(match.recipe.amounts),
-                          match.delta_E, time.perf_counter() - started, not capped,
+                          tuple(dE_unknown), residuals, spectra, measured, fractions,
+                          match_dE, time.perf_counter() - started, not capped,
                           float(wl[np.argmax(np.abs(residuals).max(axis=0))]))
 
 
@@ -200,6 +212,7 @@ def _predict_film(task):
     """Build the leave-one-out library of one target and predict it (a process task)."""
     sets, film_id, model, seed, n_draws, films, base, settings = task
     started = time.perf_counter()
+    sets = _sets({f: sets[f] for f in (*films, film_id)})
     library = build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base,
                             settings=settings)
     recipe = film_recipes({film_id: sets[film_id]})[film_id]
@@ -208,8 +221,13 @@ def _predict_film(task):
 
 
 def _portable(sets):
-    """Film sets as plain data for process tasks (a set's metadata mapping cannot be pickled)."""
-    return {f: dataclasses.replace(ms, metadata=dict(ms.metadata)) for f, ms in sets.items()}
+    """Film sets as plain fields for process tasks (a set's read-only metadata cannot be pickled)."""
+    return {f: portable_fields(ms) for f, ms in sets.items()}
+
+
+def _sets(portable):
+    """The film sets back from :func:`_portable`."""
+    return {f: MeasurementSet(**fields) for f, fields in portable.items()}
 
 
 def leave_one_out(measurements, *, targets=None, models=("radiative-transfer",), seed=0, executor=None,
