@@ -21,6 +21,7 @@ from .inference import (  # noqa: E402
     summarize,
 )
 from .instruments import get_instrument, predict  # noqa: E402  (table needs __version__)
+from .library import build_library, load_library, match_paint, predict_paint  # noqa: E402
 from .studies.robustness import robustness_study  # noqa: E402
 from .table import load_table  # noqa: E402
 
@@ -30,6 +31,7 @@ __all__ = [
     "MeasurementError",
     "MeasurementSet",
     "brdf",
+    "build_library",
     "diagnose",
     "fit_measurements",
     "fit_problem",
@@ -37,9 +39,12 @@ __all__ = [
     "hemispherical_reflectance",
     "infer",
     "load_inference",
+    "load_library",
+    "match_paint",
     "load_table",
     "optical_thickness_from_transmittance",
     "predict",
+    "predict_paint",
     "read_measurements",
     "robustness_study",
     "save_inference",

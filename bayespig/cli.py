@@ -233,7 +233,7 @@ def _simulate(args):
 
 def build_parser():
     """The argument parser of the ``bayespig`` command."""
-    from .commands import compare, cornell, design, infer, report, revigo, robustness
+    from .commands import compare, cornell, design, infer, library, report, revigo, robustness
     from .instruments import BUILT_IN_INSTRUMENTS
 
     parser = argparse.ArgumentParser(prog="bayespig", description=__doc__,
@@ -308,6 +308,7 @@ def build_parser():
     design.add_design_parser(sub)
     revigo.add_revigo_parser(sub)
     cornell.add_cornell_parser(sub)
+    library.add_library_parsers(sub)
     return parser
 
 

@@ -53,7 +53,8 @@ Pilot start, adaptation
     :func:`sample_joint`: a per-wavelength run, the usual
     :func:`bayespig.inference.infer_problem`; for a library, a ball around a point fit), uses
     their medians as ``theta_hat``, and starts the walkers on them (picked independently per
-    wavelength) with ``phi`` in a small ball around ``phi_0``. A joint run of :data:`ADAPTATION_STEPS` steps from there gives the
+    wavelength) with ``phi`` in a small ball around ``phi_0`` (a start whose shift
+    ``S (phi - phi_0)`` would take a block out of its box starts at its picked physical point). A joint run of :data:`ADAPTATION_STEPS` steps from there gives the
     regression's ``theta_hat`` and ``S``; the run proper starts on its last walkers (the same
     physical points in the new coordinates). Any fixed ``S`` leaves the target invariant; the
     adaptation's draws are not kept.
@@ -748,6 +749,11 @@ def sample_blocks(model, specs, draws, settings, joint_seed, start_seed, priors=
     spread = np.concatenate([np.asarray(s.start_sd, dtype=float) for s in joint.specs])
     start = np.concatenate([residual, rng.normal(joint.shared_nominal, spread, (n_total, joint.n_shared))], axis=1)
     start[:, joint.shared_slice] = np.clip(start[:, joint.shared_slice], joint.shared_lower, joint.shared_upper)
+    # a start whose shift S (phi - phi_0) takes a block out of its box (a block near its
+    # box's edge, e.g. a white's a ~ 1e-4) starts at its picked physical point instead
+    outside = ~joint.in_support(start)
+    if outside.any():
+        start[outside] = joint.u_of(joint._flat(picked[outside]), start[outside][:, joint.shared_slice])
     adapt_seed, joint_seed = joint_seed.spawn(2)
 
     def run_joint(posterior, run_settings, seed, walkers):

@@ -1,0 +1,516 @@
+"""Building a pigment library: every pigment's constants from all films that contain it.
+
+Each film (a :class:`~bayespig.data.MeasurementSet` of one film group, e.g. a Revigo drawdown
+over its black and white cards) has a recipe (``metadata["composition"]``); its values follow
+from the constants of its pigments, mixed by their concentrations, at its thickness ``h``,
+through a :class:`FilmModel` (radiative transfer: per pigment and wavelength ``[a_i, log
+sigma_i]``; the mixing rules of paper section 2). The posterior is the one joint machinery for
+parameters shared over wavelengths (:mod:`bayespig.inference.shared`): per wavelength a block of
+the constants being fitted (:class:`LibraryLayout`, ``k = 2 * n_pigments``), and the films'
+thicknesses as the shared spec (:class:`bayespig.inference.film_thickness.FilmThickness`, prior
+``log h ~ N(0, 0.5^2)`` unless measured): residual coordinates, block moves, one run per stage.
+
+Stages: a cut (modular) posterior
+---------------------------------
+One joint posterior over a whole palette (Revigo: 20 pigments x 2 constants x 31 bands plus 84
+thicknesses) is too big for the block sampler, so the library is built in stages
+(:func:`stage_plan`), each stage one joint run per independent group of pigments:
+
+1. the *base* pigments (default: those present in at least :data:`BASE_SHARE` of the films;
+   Revigo: ZincWhite and BoneBlack; ``base_pigments=`` overrides) jointly, from the films made
+   of base pigments only;
+2. repeatedly, every pigment that is the only not-yet-fitted pigment of some remaining films,
+   from those films, the pigments fitted before *fixed at their posterior medians*; pigments of
+   one stage are independent groups, run in parallel through the executor;
+3. whatever is left (films with two or more unfitted pigments, none of which can be isolated):
+   their pigments jointly, per connected group.
+
+This is not the full joint posterior: information flows only forward (a tint film informs the
+tinting pigment, never the white it was fitted with), the fixed pigments' uncertainty is not
+propagated into the later stages' fits, and a film all of whose pigments were fitted before it
+could be used (Revigo: the two-colour mixtures 08D-08G, 16D-16F, 17D, 17F) is not used at all
+(marked ``used=False`` in :attr:`PigmentLibrary.films`; a candidate for validation). The
+library's draws of each pigment are those of its own stage, independent between stages, so a
+prediction with the library's draws does carry every pigment's posterior uncertainty. Where an
+earlier pigment's posterior is wide (a nearly opaque white's ``sigma`` is bounded only from
+below by its films), its median is a poor point to fix, and the later films it tints can then
+be fitted worse than their noise: each film's ``rms_log_deviation`` shows it (simulated: a white
+of ``tau ~ 15`` left a 10 % tint at 5.8 % rms against 1 % noise; at ``tau ~ 7`` all films fit
+to 0.1-1.3 %).
+
+Measured on the 84 Revigo films (``benchmarks/library.py``, 2 cores shared with other work, load
+average 6-9): stage 1 (ZincWhite, BoneBlack from 07A, 07C-07F) needs 19 576 steps (877 s) to
+converge; the 18 groups of stage 2 converge in 656-3 933 steps (25-273 s each; ZincWhiteLinseed,
+one film, reached a 5 000-step cap), 854 s on 2 processes; 9 films unused. The fit is not yet
+good: median rms of ``log(measured / predicted)`` 6 % per film against ``eps = 2 %``, worst
+16A (BariumSulphate masstone, 29 %), 11A, 11D, 14A (20-24 %): the shades and tints of a pigment
+pull against its masstone when the fixed white and black are only their medians.
+
+Start of each run: a per-wavelength least-squares fit of the stage's constants at the nominal
+thicknesses (``h = 1``, or the measured ones; best of a few starts per wavelength), the walkers
+in a small ball (:data:`START_BALL_SD`) around it; the adaptation run of
+:func:`~bayespig.inference.shared.sample_blocks` then spreads them before the run proper.
+Convergence: the run-length rule of the per-wavelength runs on the joint vector (R-hat and ESS
+of every coordinate on the thinned chain, :data:`DEFAULT_SETTINGS`); each stage's R-hat, ESS,
+steps and cap are in :attr:`PigmentLibrary.stages`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.metadata
+import os
+import sys
+import time
+from concurrent.futures import as_completed
+from pathlib import Path
+
+import numpy as np
+from scipy import optimize, sparse
+
+from .._pool import executor_or_local_pool
+from ..inference.arguments import check_flag
+from ..inference.film_thickness import FilmThickness
+from ..inference.settings import InferenceSettings
+from ..inference.shared import BlockLayout, sample_blocks
+from .film_models import FILM_MODELS, film_model as _named_film_model
+from .library import PigmentLibrary
+from .recipes import concentrations, film_recipes
+
+__all__ = [
+    "BASE_SHARE",
+    "DEFAULT_SETTINGS",
+    "START_BALL_SD",
+    "LibraryLayout",
+    "build_library",
+    "stage_plan",
+]
+
+#: Default base pigments: those with a nonzero amount in at least this share of the films.
+BASE_SHARE = 0.25
+#: Sampler settings of every stage's run (the library's draws: n_ensembles * draws_per_chain).
+DEFAULT_SETTINGS = InferenceSettings(target_ess=400.0, draws_per_chain=256, max_steps=20000)
+#: Sd of the walkers' start ball around the least-squares fit, in the sampled coordinates
+#: (``a`` and ``log sigma``); less near the box's edge (0.3 of the distance to it).
+START_BALL_SD = 0.01
+#: Start points of the per-wavelength least-squares fit: ``(a, sigma)`` of every pigment.
+LEAST_SQUARES_STARTS = ((0.01, 3.0), (0.3, 30.0), (0.001, 300.0), (0.6, 3.0))
+#: Points of the start ball (draws of :func:`~bayespig.inference.shared.sample_blocks`).
+START_POINTS = 64
+
+def _film_model(name):
+    if name not in FILM_MODELS:
+        raise ValueError(f"model must be one of {sorted(FILM_MODELS)}, got {name!r}")
+    return _named_film_model(name)
+
+
+class LibraryLayout(BlockLayout):
+    """Block per wavelength: the constants ``[a_p, log sigma_p]`` of the pigments being fitted.
+
+    The films' values from the fitted pigments' block, the fixed pigments' constants (earlier
+    stages' medians) and every film's thickness (model input ``thickness``, (W, n_films)).
+
+    Parameters
+    ----------
+    film_model : FilmModel
+    predictors : sequence of FilmPredictor
+        One per film (``for_film``), all on the same wavelengths.
+    film_concentrations : numpy.ndarray
+        ``D`` of every film over ``fitted + fixed`` pigments, (n_films, n_fitted + n_fixed).
+    fitted : sequence of str
+        The pigments whose constants the block holds.
+    fixed_constants : numpy.ndarray, optional
+        Constants of the fixed pigments, (n_wl, n_fixed, 2).
+    eps : float
+        Known relative error of films without their own [-].
+    wavelength_nm : numpy.ndarray
+    """
+
+    def __init__(self, film_model, predictors, film_concentrations, fitted, fixed_constants, eps, wavelength_nm):
+        self.film_model = film_model
+        self.predictors = tuple(predictors)
+        self.fitted = tuple(fitted)
+        self.concentrations = np.asarray(film_concentrations, dtype=float)
+        self.wavelength_nm = np.asarray(wavelength_nm, dtype=float)
+        n_wl = self.wavelength_nm.size
+        self.fixed = (np.zeros((n_wl, 0, 2)) if fixed_constants is None
+                      else np.asarray(fixed_constants, dtype=float))
+        self.names = tuple(f"{c}[{p}]" for p in self.fitted for c in film_model.constant_names)
+        P = len(self.fitted)
+        self.lower = np.tile(np.asarray(film_model.lower, dtype=float), (n_wl, P))
+        self.upper = np.tile(np.asarray(film_model.upper, dtype=float), (n_wl, P))
+        self.observed = np.concatenate([p.observed for p in self.predictors], axis=1)
+        self.eps = np.concatenate([np.where(np.isfinite(p.eps), p.eps, eps) * np.ones(p.observed.shape[1])
+                                   for p in self.predictors])
+        self.value_slices = []
+        start = 0
+        for p in self.predictors:
+            self.value_slices.append(slice(start, start + p.observed.shape[1]))
+            start += p.observed.shape[1]
+
+    def constants(self, theta):
+        """Every pigment's constants (W, n_wl, n_fitted + n_fixed, 2) from blocks (W, n_wl, k)."""
+        W, n_wl = theta.shape[:2]
+        fitted = theta.reshape(W, n_wl, len(self.fitted), 2)
+        fixed = np.broadcast_to(self.fixed, (W,) + self.fixed.shape)
+        return np.concatenate([fitted, fixed], axis=2)
+
+    def predict(self, theta, inputs):
+        """Values of every film, concatenated, (W, n_wl, n_values)."""
+        constants = self.constants(theta)
+        thickness = inputs["thickness"]
+        return np.concatenate([p.values(constants, c, thickness[:, f])
+                               for f, (p, c) in enumerate(zip(self.predictors, self.concentrations))], axis=2)
+
+
+def _base_pigments(recipes):
+    films = len(recipes)
+    counts = {}
+    for recipe in recipes.values():
+        for pigment in recipe.amounts:
+            counts[pigment] = counts.get(pigment, 0) + 1
+    return tuple(sorted(p for p, n in counts.items() if n >= BASE_SHARE * films))
+
+
+def _components(films_pigments):
+    """Connected groups of pigments over films: list of (pigments, films)."""
+    groups = []
+    for film, pigments in films_pigments.items():
+        merged = [g for g in groups if g[0] & pigments]
+        pig, fil = set(pigments), [film]
+        for g in merged:
+            groups.remove(g)
+            pig |= g[0]
+            fil += g[1]
+        groups.append((pig, fil))
+    return [(tuple(sorted(p)), tuple(sorted(f))) for p, f in sorted(groups, key=lambda g: sorted(g[0]))]
+
+
+def stage_plan(recipes, base_pigments=None, known=()):
+    """The stages of the build (see the module docstring).
+
+    Parameters
+    ----------
+    recipes : dict
+        Film id -> Recipe.
+    base_pigments : sequence of str, optional
+        Default: pigments with a nonzero amount in at least :data:`BASE_SHARE` of the films.
+    known : sequence of str
+        Pigments fitted already (a base library's): no stage fits them, films made of them only
+        are unused.
+
+    Returns
+    -------
+    tuple
+        ``(stages, unused)``: a list of stages, each a list of groups ``(pigments, films)``
+        (tuples of str) run independently; and the films used by no stage (tuple of str).
+    """
+    base = _base_pigments(recipes) if base_pigments is None else tuple(base_pigments)
+    base = tuple(p for p in base if p not in set(known))
+    known_pigments = {p for r in recipes.values() for p in r.amounts} | set(known)
+    unknown_base = sorted(set(base) - known_pigments)
+    if unknown_base:
+        raise ValueError(f"base_pigments: {unknown_base} are in no film's recipe")
+    stages, fitted = [], set(known)
+    remaining = {f: set(r.amounts) for f, r in recipes.items()}
+    base_films = tuple(sorted(f for f, pig in remaining.items() if pig <= set(base) and pig - fitted)) if base else ()
+    if base_films:
+        base_used = tuple(sorted(set().union(*(remaining[f] for f in base_films))))
+        stages.append([(base_used, base_films)])
+        fitted |= set(base_used)
+        for f in base_films:
+            del remaining[f]
+    unused = []
+    while True:
+        for f in [f for f, pig in remaining.items() if pig <= fitted]:
+            unused.append(f)
+            del remaining[f]
+        singles = {}
+        for f, pig in sorted(remaining.items()):
+            left = pig - fitted
+            if len(left) == 1:
+                singles.setdefault(next(iter(left)), []).append(f)
+        if not singles:
+            break
+        stages.append([((p,), tuple(films)) for p, films in sorted(singles.items())])
+        fitted |= set(singles)
+        for films in singles.values():
+            for f in films:
+                del remaining[f]
+    if remaining:
+        stages.append(_components({f: pig - fitted for f, pig in remaining.items()}))
+    return stages, tuple(sorted(unused))
+
+
+def _least_squares_start(layout, thickness):
+    """Per-wavelength least-squares fit of the block at fixed thicknesses, (n_wl, k); best of
+    :data:`LEAST_SQUARES_STARTS` per wavelength."""
+    n_wl, k = layout.n_wavelengths, layout.size
+    inputs = {"thickness": thickness[None]}
+    lower, upper = layout.lower.ravel(), layout.upper.ravel()
+    margin = 1e-6 * (upper - lower)
+    n_values = layout.observed.shape[1]
+    sparsity = sparse.kron(sparse.eye(n_wl), np.ones((n_values, k)))
+
+    def residual(x):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            r = np.log(layout.observed / layout.predict(x.reshape(1, n_wl, k), inputs)[0]) / layout.eps
+        return np.nan_to_num(r, nan=1e6, posinf=1e6, neginf=-1e6).ravel()
+
+    best, best_cost = None, None
+    for a, sigma in LEAST_SQUARES_STARTS:
+        x0 = np.tile(np.array([a, np.log(sigma)]), n_wl * k // 2)
+        x0 = np.clip(x0, lower + margin, upper - margin)
+        fit = optimize.least_squares(residual, x0, bounds=(lower, upper), jac_sparsity=sparsity, x_scale="jac",
+                                     max_nfev=200)
+        cost = (residual(fit.x).reshape(n_wl, n_values) ** 2).sum(axis=1)
+        x = fit.x.reshape(n_wl, k)
+        if best is None:
+            best, best_cost = x, cost
+        else:
+            better = cost < best_cost
+            best[better], best_cost[better] = x[better], cost[better]
+    return best
+
+
+def _portable(measurements):
+    """A MeasurementSet as picklable fields (its metadata is a read-only mapping, which pickle refuses)."""
+    fields = {f.name: getattr(measurements, f.name) for f in dataclasses.fields(measurements)}
+    fields["metadata"] = dict(fields["metadata"])
+    return fields
+
+
+def _fit_group(task):
+    """One stage group's joint run (a process-pool task): constants and thickness draws."""
+    from ..data import MeasurementSet
+
+    start_time = time.perf_counter()
+    film_model = _film_model(task["model"])
+    sets = [MeasurementSet(**fields) for fields in task["measurements"]]
+    predictors = [film_model.for_film(ms) for ms in sets]
+    wavelength_nm = np.asarray(sets[0].wavelength_nm, dtype=float)
+    layout = LibraryLayout(film_model, predictors, task["concentrations"], task["pigments"],
+                           task["fixed_constants"], task["eps"], wavelength_nm)
+    spec = FilmThickness(task["films"], measured=task["measured"])
+    start_seq, joint_seq, ball_seq = np.random.SeedSequence(task["seed"], spawn_key=task["spawn_key"]).spawn(3)
+    centre = _least_squares_start(layout, np.exp(spec.nominal))
+    rng = np.random.default_rng(ball_seq)
+    # the ball's sd per coordinate: START_BALL_SD, or less near the box's edge (a white's a ~ 1e-4)
+    room = np.minimum(centre - layout.lower, layout.upper - centre)
+    sd = np.minimum(START_BALL_SD, 0.3 * np.maximum(room, 1e-9))
+    draws = np.clip(centre + sd * rng.standard_normal((START_POINTS,) + centre.shape), layout.lower, layout.upper)
+    run, used, joint = sample_blocks(layout, [spec], draws, task["settings"], joint_seq, start_seq)
+    theta = run["theta"]
+    n_chains, n_draws, n_dim = theta.shape
+    flat = theta.reshape(-1, n_dim)
+    blocks, thickness = joint.unpack(flat)
+    constants = blocks.reshape(flat.shape[0], layout.n_wavelengths, len(layout.fitted), 2)
+    # fit quality per film at the posterior median prediction
+    predicted = np.median(joint.predict(flat), axis=0)  # (n_wl, n_values)
+    deviation = np.log(layout.observed / predicted)
+    rms = [float(np.sqrt(np.mean(deviation[:, part] ** 2))) for part in layout.value_slices]
+    import arviz as az
+
+    chains = thickness.reshape(n_chains, n_draws, -1)
+    constant_chains = constants.reshape(n_chains, n_draws, -1)
+    rhat_h = np.array([float(az.rhat(chains[..., j])) for j in range(chains.shape[-1])])
+    ess_h = np.array([float(az.ess(chains[..., j])) for j in range(chains.shape[-1])])
+    rhat_c = np.array([float(az.rhat(constant_chains[..., j])) for j in range(constant_chains.shape[-1])])
+    ess_c = np.array([float(az.ess(constant_chains[..., j])) for j in range(constant_chains.shape[-1])])
+    return {
+        "pigments": task["pigments"], "films": task["films"], "stage": task["stage"],
+        "constants": constants, "thickness": thickness, "rms_log_deviation": rms,
+        "diagnostics": {
+            "stage": task["stage"], "pigments": list(task["pigments"]), "films": list(task["films"]),
+            "n_steps": int(run["n_steps"]), "max_steps_reached": bool(run["max_steps_reached"]),
+            "n_walkers": int(used.n_walkers), "n_ensembles": int(used.n_ensembles),
+            "thickness_rhat_max": float(rhat_h.max()), "thickness_ess_min": float(ess_h.min()),
+            "constants_rhat_max": float(rhat_c.max()), "constants_ess_min": float(ess_c.min()),
+            "seconds": time.perf_counter() - start_time,
+        },
+    }
+
+
+def _read_measurements(measurements):
+    if isinstance(measurements, (str, os.PathLike)):
+        from ..data import read_revigo
+
+        path = Path(measurements)
+        if not path.exists():
+            raise ValueError(f"measurements: '{path}' does not exist")
+        return read_revigo(path)
+    if not isinstance(measurements, dict) or not measurements:
+        raise TypeError("measurements must be a non-empty dict film id -> MeasurementSet, or a path to the "
+                        f"Revigo data folder, got {type(measurements).__name__}")
+    return measurements
+
+
+def _versions():
+    out = {}
+    for name in ("bayespig", "numpy", "scipy", "emcee", "arviz"):
+        try:
+            out[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            out[name] = "unknown"
+    return out
+
+
+def build_library(measurements, *, model="radiative-transfer", seed=0, executor=None, progress=True,
+                  densities=None, eps=0.02, base_pigments=None, thickness=None, settings=None, base=None):
+    """A pigment library from films of known recipes (see the module docstring for the stages).
+
+    Parameters
+    ----------
+    measurements : dict or str or os.PathLike
+        Film id -> :class:`~bayespig.data.MeasurementSet` (one film group each, its recipe in
+        ``metadata["composition"]``), e.g. from :func:`bayespig.data.read_revigo`; or the path
+        of a Revigo data folder.
+    model : {"radiative-transfer"}
+        The film model.
+    seed : int
+        Seeds every stage (:class:`numpy.random.SeedSequence` with the stage and group as its
+        spawn key: the same seed gives the same library however the groups are scheduled).
+    executor : concurrent.futures.Executor, optional
+        Runs a stage's independent groups; default a local pool of 2 processes when a stage has
+        several groups.
+    progress : bool
+        One line per stage group on stderr.
+    densities : dict, optional
+        Pigment -> dry density [g/cm^3] for the concentrations (appendix A2).
+    eps : float
+        Known relative measurement error of films without their own [-].
+    base_pigments : sequence of str, optional
+        The pigments of stage 1 (default: present in >= :data:`BASE_SHARE` of the films).
+    thickness : dict, optional
+        Film id -> measured thickness (one unit for all; the prior's centre); others relative.
+    settings : InferenceSettings, optional
+        Default :data:`DEFAULT_SETTINGS`.
+    base : PigmentLibrary, optional
+        A library whose pigments count as fitted (its draws are the new library's for them, its
+        medians fix them in the fits of the others): e.g. a white and a black fitted once and
+        shared by many libraries (the leave-one-out study), built with the same model.
+
+    Returns
+    -------
+    PigmentLibrary
+    """
+    progress = check_flag("progress", progress)
+    if not (isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and seed >= 0):
+        raise TypeError(f"seed must be a non-negative integer, got {seed!r}")
+    if not (np.isfinite(eps) and eps > 0):
+        raise ValueError(f"eps must be a positive number, got {eps!r}")
+    film_model = _film_model(model)
+    settings = DEFAULT_SETTINGS if settings is None else settings
+    sets = _read_measurements(measurements)
+    recipes = film_recipes(sets)
+    thickness = {} if thickness is None else dict(thickness)
+    unknown = sorted(set(thickness) - set(sets))
+    if unknown:
+        raise ValueError(f"thickness: films {unknown} are not among the measurements")
+    wavelengths = [np.asarray(ms.wavelength_nm, dtype=float) for ms in sets.values()]
+    if any(w.shape != wavelengths[0].shape or not np.allclose(w, wavelengths[0]) for w in wavelengths):
+        raise ValueError("measurements: every film must be measured at the same wavelengths")
+    known = ()
+    medians = {}  # pigment -> (n_wl, 2)
+    if base is not None:
+        if not isinstance(base, PigmentLibrary):
+            raise TypeError(f"base must be a PigmentLibrary, got {type(base).__name__}")
+        if base.model != model:
+            raise ValueError(f"base is a {base.model!r} library; this build is {model!r}")
+        if base.wavelength_nm.shape != wavelengths[0].shape or not np.allclose(base.wavelength_nm, wavelengths[0]):
+            raise ValueError("base: its wavelengths differ from the measurements'")
+        known = tuple(base.pigments)
+        for j, p in enumerate(base.pigments):
+            medians[p] = np.median(base.constants[:, :, j], axis=0)
+    stages, unused = stage_plan(recipes, base_pigments, known=known)
+    n_wl = wavelengths[0].size
+    results = []
+    start = time.perf_counter()
+    for s, groups in enumerate(stages, start=1):
+        tasks = []
+        for g, (pigments, films) in enumerate(groups):
+            fixed = sorted({p for f in films for p in recipes[f].amounts} - set(pigments))
+            order = tuple(pigments) + tuple(fixed)
+            tasks.append({
+                "model": model, "measurements": [_portable(sets[f]) for f in films], "films": films,
+                "pigments": tuple(pigments), "stage": s,
+                "concentrations": np.stack([concentrations(recipes[f], order, densities=densities) for f in films]),
+                "fixed_constants": (np.stack([medians[p] for p in fixed], axis=1) if fixed else None),
+                "measured": np.array([thickness.get(f, np.nan) for f in films], dtype=float),
+                "eps": float(eps), "settings": settings, "seed": int(seed), "spawn_key": (s, g),
+            })
+        stage_start = time.perf_counter()
+        def report(result):
+            if progress:
+                d = result["diagnostics"]
+                print(f"library stage {s}/{len(stages)}: {', '.join(d['pigments'])} from {len(d['films'])} films: "
+                      f"{d['n_steps']} steps{' (capped)' if d['max_steps_reached'] else ''}, "
+                      f"R-hat <= {max(d['thickness_rhat_max'], d['constants_rhat_max']):.3f}, "
+                      f"thickness ESS >= {d['thickness_ess_min']:.0f}, {d['seconds']:.1f} s",
+                      file=sys.stderr, flush=True)
+            return result
+
+        with executor_or_local_pool(executor, needed=len(tasks) > 1, max_workers=min(2, len(tasks))) as pool:
+            if pool is None:
+                done = [report(_fit_group(t)) for t in tasks]
+            else:
+                futures = [pool.submit(_fit_group, t) for t in tasks]
+                for future in as_completed(futures):
+                    report(future.result())
+                done = [f.result() for f in futures]
+        for result in done:
+            for j, p in enumerate(result["pigments"]):
+                medians[p] = np.median(result["constants"][:, :, j], axis=0)
+        if progress:
+            print(f"library stage {s}/{len(stages)} done in {time.perf_counter() - stage_start:.1f} s",
+                  file=sys.stderr, flush=True)
+        results.extend(done)
+    return _assemble(film_model, results, recipes, unused, wavelengths[0], seed, settings, eps, densities,
+                     base_pigments, model, stages, time.perf_counter() - start, base)
+
+
+def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, settings, eps, densities,
+              base_pigments, model, stages, seconds, base=None):
+    """The library from the stage groups' results (and a base library's pigments first)."""
+    parts = [r["constants"] for r in results] + ([] if base is None else [base.constants])
+    if not parts:
+        raise ValueError("measurements: no film has a pigment to fit (all are in the base library)")
+    n_draws = min(c.shape[0] for c in parts)
+    pigments = tuple(p for r in results for p in r["pigments"]) + (() if base is None else tuple(base.pigments))
+    constants = np.concatenate([c[:n_draws] for c in parts], axis=2)  # (N, n_wl, P, 2)
+    film_ids = tuple(sorted(recipes))
+    thickness = np.full((n_draws, len(film_ids)), np.nan)
+    films = {}
+    for r in results:
+        for j, f in enumerate(r["films"]):
+            h = r["thickness"][:n_draws, j]
+            thickness[:, film_ids.index(f)] = h
+            films[f] = {"stage": r["stage"], "used": True, "rms_log_deviation": r["rms_log_deviation"][j],
+                        "thickness_median": float(np.median(h)),
+                        "thickness_q05": float(np.quantile(h, 0.05)), "thickness_q95": float(np.quantile(h, 0.95))}
+    records = []
+    for f in film_ids:
+        entry = {"id": f, "recipe": dict(recipes[f].amounts), "pigments": sorted(recipes[f].amounts)}
+        entry.update(films.get(f, {"stage": None, "used": False, "rms_log_deviation": None,
+                                   "thickness_median": None, "thickness_q05": None, "thickness_q95": None}))
+        records.append(entry)
+    base_medians = [] if base is None else [f["thickness_median"] for f in base.films
+                                            if f.get("used") and f.get("thickness_median")]
+    log_h = np.log([films[f]["thickness_median"] for f in films] + base_medians)
+    thickness_prior = (float(log_h.mean()), float(log_h.std(ddof=1)) if log_h.size > 1 else 0.5)
+    provenance = {
+        "seed": int(seed), "eps": float(eps), "base_pigments": None if base_pigments is None else list(base_pigments),
+        "settings": dataclasses.asdict(settings), "versions": _versions(), "seconds": seconds,
+        "stage_plan": [[{"pigments": list(p), "films": list(f)} for p, f in groups] for groups in stages],
+        "unused_films": list(unused),
+        "base_library": None if base is None else {"pigments": list(base.pigments),
+                                                   "films": [f["id"] for f in base.films if f.get("used")],
+                                                   "provenance": base.provenance},
+        "method": "staged (cut) posterior, bayespig.library.build",
+    }
+    return PigmentLibrary(
+        model=model, pigments=pigments, wavelength_nm=np.asarray(wavelength_nm, dtype=float),
+        constants=constants, constant_names=tuple(film_model.constant_names), thickness_prior=thickness_prior,
+        films=tuple(records), film_ids=film_ids, thickness=thickness,
+        densities=None if densities is None else dict(densities), model_error=None, provenance=provenance,
+        stages=tuple(r["diagnostics"] for r in results) + (() if base is None else tuple(base.stages)))

@@ -1,0 +1,364 @@
+"""Cross-validation of a pigment library: each mixture film predicted by a library built without it.
+
+The library's model error (the term of :func:`bayespig.predict_paint`'s credible region beyond
+the constants' posterior) is learned here, from how well films the library has *not* seen are
+predicted. For each target film ``X`` (default: every film with two or more pigments):
+
+1. a library is built without ``X`` from the films that carry what ``X`` needs: those made only
+   of ``X``'s pigments and the base pigments (:func:`training_films`); the base pigments' own
+   films are fitted once (a base library, :func:`bayespig.build_library`'s ``base=``) and shared
+   by every target that is not one of them;
+2. ``X`` is predicted from its recipe over each of its measured cards, its unknown thickness
+   the one free scalar (fitted to its spectra in relative deviation, median constants), and
+   also drawn from the library's own films (nothing of ``X`` used but its recipe and cards);
+3. the relative residuals ``measured / predicted - 1`` over all targets give the model-error
+   covariance over wavelengths (:func:`bayespig.library.predict.model_error_from_residuals`);
+   for the coverage of ``X``'s region only the *other* targets' residuals are used.
+
+The films are measured over cards (a film sample whose substrate is a measured substrate sample
+of its set, e.g. a Revigo drawdown over its black and white cards), with a hemispherical
+instrument (8°/d SCE/SCI) the film models predict.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+from scipy import optimize
+
+from .. import colorimetry
+from .._pool import executor_or_local_pool
+from ..data import MeasurementSet
+from ..inference.settings import InferenceSettings
+from .build import _base_pigments, _portable as portable_fields, build_library
+from .match import match_paint
+from .predict import DEFAULT_LEVEL, model_error_from_residuals, predict_reflectance
+from .recipes import film_recipes
+
+__all__ = [
+    "LOO_SETTINGS",
+    "FilmPrediction",
+    "card_spectra",
+    "coverage",
+    "cross_validate",
+    "leave_one_out",
+    "training_films",
+]
+
+#: Sampler settings of the leave-one-out builds: shorter runs than a library's default (ESS 100
+#: per coordinate instead of 400, 64 stored draws per chain): a study builds ~100 libraries, and
+#: a prediction uses the constants' median and a few hundred draws.
+LOO_SETTINGS = InferenceSettings(target_ess=100.0, draws_per_chain=64, max_steps=6000)
+#: Relative thickness search range of the fitted-thickness prediction.
+THICKNESS_RANGE = (1e-2, 1e2)
+#: Draws of each prediction.
+N_DRAWS = 200
+
+
+@dataclasses.dataclass(frozen=True)
+class FilmPrediction:
+    """One held-out film predicted by one film model.
+
+    Attributes
+    ----------
+    film_id, model : str
+    recipe : dict
+        Pigment -> mass fraction.
+    cards : tuple of str
+        The substrate samples, one per predicted spectrum.
+    thickness : float
+        Fitted relative thickness.
+    delta_E, delta_E_unknown : tuple of float
+        ΔE00 (D65, CIE 1964 10°) per card: fitted thickness, and thickness drawn from the library's films.
+    residuals : numpy.ndarray
+        (n_cards, n_wl) ``measured / predicted - 1`` (fitted thickness, median of the draws).
+    draws : numpy.ndarray
+        (n_cards, n_draws, n_wl) model spectra of the posterior draws (no model error).
+    measured : numpy.ndarray
+        (n_cards, n_wl).
+    match_fractions : dict
+        The recipe :func:`bayespig.match_paint` finds for the last card's spectrum (its own pigments allowed).
+    match_delta_E : float
+    seconds : float
+    converged : bool
+        No stage of its library reached the step cap.
+    worst_band_nm : float
+        Band of the largest relative residual.
+    """
+
+    film_id: str
+    model: str
+    recipe: dict
+    cards: tuple
+    thickness: float
+    delta_E: tuple
+    delta_E_unknown: tuple
+    residuals: np.ndarray
+    draws: np.ndarray
+    measured: np.ndarray
+    match_fractions: dict
+    match_delta_E: float
+    seconds: float
+    converged: bool
+    worst_band_nm: float
+
+
+def card_spectra(measurements):
+    """The film's spectra over its measured cards: ``(instrument, [(card name, card, film)])``.
+
+    Raises
+    ------
+    ValueError
+        When no film sample of the set lies on a measured substrate sample, or the films were
+        measured with several instruments.
+    """
+    pairs, instruments = [], set()
+    for sample in measurements.samples:
+        if sample.role != "film" or not isinstance(sample.substrate, str):
+            continue
+        card = measurements.sample(sample.substrate)
+        for m in sample.measurements:
+            instruments.add(m.label)
+            match = [c for c in card.measurements if c.label == m.label]
+            if match:
+                pairs.append((card.name, np.asarray(match[0].values, dtype=float), np.asarray(m.values, dtype=float)))
+    if not pairs or len(instruments) != 1:
+        raise ValueError(f"film set {measurements.metadata.get('film_id', measurements.source)!r}: cross-validation "
+                         "needs films over measured cards with one hemispherical instrument")
+    return instruments.pop(), pairs
+
+
+def training_films(recipes, target, base_pigments):
+    """Films of ``target``'s leave-one-out library, split into ``(base_only, others)``.
+
+    The films made only of ``target``'s pigments and the base pigments, without ``target``;
+    ``base_only`` are those of base pigments alone (a base library's films).
+    """
+    allowed = set(recipes[target].amounts) | set(base_pigments)
+    films = [f for f in sorted(recipes) if f != target and set(recipes[f].amounts) <= allowed]
+    base_only = tuple(f for f in films if set(recipes[f].amounts) <= set(base_pigments))
+    return base_only, tuple(f for f in films if f not in base_only)
+
+
+def _fit_thickness(library, recipe, constants, instrument, pairs):
+    """The one free scalar: relative thickness minimising the relative misfit over every card."""
+    def misfit(log_h):
+        h = np.array([np.exp(log_h)])
+        total = 0.0
+        for _, card, values in pairs:
+            R = predict_reflectance(library, recipe, constants[None], h, instrument=instrument, substrate=card)[0]
+            total += float(np.sum((values / R - 1.0) ** 2))
+        return total
+    result = optimize.minimize_scalar(misfit, bounds=np.log(THICKNESS_RANGE), method="bounded",
+                                      options={"xatol": 1e-4})
+    return float(np.exp(result.x))
+
+
+def _build(task):
+    """A library of the films ``films`` (a process task), on a base library when given."""
+    sets, films, model, seed, base, settings = task
+    sets = _sets({f: sets[f] for f in films})
+    return build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base,
+                         settings=settings)
+
+
+def predict_held_out(library, measurements, recipe, *, model, film_id, seed=0, n_draws=N_DRAWS, started=None):
+    """Predict one film the library has not seen (see the module docstring, step 2)."""
+    started = time.perf_counter() if started is None else started
+    instrument, pairs = card_spectra(measurements)
+    median = np.median(library.constants, axis=0)
+    h = _fit_thickness(library, recipe, median, instrument, pairs)
+    rng = np.random.default_rng(seed)
+    index = rng.choice(library.constants.shape[0], size=n_draws, replace=n_draws > library.constants.shape[0])
+    draws = library.constants[index]
+    mean, sd = library.thickness_prior
+    h_unknown = np.exp(rng.normal(mean, sd, n_draws))
+    wl = library.wavelength_nm
+    # colour needs the visible spectrum: with fewer bands only the spectral residuals are scored
+    coloured = wl.size >= colorimetry.MIN_WAVELENGTHS
+
+    def delta_E(R, values):
+        if not coloured:
+            return float("nan")
+        lab = colorimetry.reflectance_to_Lab(values, wl)
+        return float(colorimetry.delta_E2000(colorimetry.reflectance_to_Lab(np.median(R, axis=0), wl), lab))
+
+    spectra, dE, dE_unknown = [], [], []
+    for _, card, values in pairs:
+        R = predict_reflectance(library, recipe, draws, np.full(n_draws, h), instrument=instrument, substrate=card)
+        Ru = predict_reflectance(library, recipe, draws, h_unknown, instrument=instrument, substrate=card)
+        spectra.append(R)
+        dE.append(delta_E(R, values))
+        dE_unknown.append(delta_E(Ru, values))
+    spectra = np.stack(spectra)
+    measured = np.stack([values for _, _, values in pairs])
+    residuals = measured / np.median(spectra, axis=1) - 1.0
+    _, card, values = pairs[-1]
+    fractions, match_dE = {}, float("nan")
+    if coloured:
+        match = match_paint(library, values, pigments=tuple(recipe.amounts), instrument=instrument, thickness="fit",
+                            substrate=card, seed=seed, n_spread=0, n_draws=50)
+        fractions, match_dE = dict(match.recipe.amounts), match.delta_E
+    capped = any(stage.get("max_steps_reached") for stage in library.stages)
+    return FilmPrediction(film_id, model, dict(recipe.amounts), tuple(name for name, _, _ in pairs), h, tuple(dE),
+                          tuple(dE_unknown), residuals, spectra, measured, fractions,
+                          match_dE, time.perf_counter() - started, not capped,
+                          float(wl[np.argmax(np.abs(residuals).max(axis=0))]))
+
+
+def _predict_film(task):
+    """Build the leave-one-out library of one target and predict it (a process task)."""
+    sets, film_id, model, seed, n_draws, films, base, settings = task
+    started = time.perf_counter()
+    sets = _sets({f: sets[f] for f in (*films, film_id)})
+    library = build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base,
+                            settings=settings)
+    recipe = film_recipes({film_id: sets[film_id]})[film_id]
+    return predict_held_out(library, sets[film_id], recipe, model=model, film_id=film_id, seed=seed,
+                            n_draws=n_draws, started=started)
+
+
+def _portable(sets):
+    """Film sets as plain fields for process tasks (a set's read-only metadata cannot be pickled)."""
+    return {f: portable_fields(ms) for f, ms in sets.items()}
+
+
+def _sets(portable):
+    """The film sets back from :func:`_portable`."""
+    return {f: MeasurementSet(**fields) for f, fields in portable.items()}
+
+
+def leave_one_out(measurements, *, targets=None, models=("radiative-transfer",), seed=0, executor=None,
+                  progress=None, n_draws=N_DRAWS, settings=LOO_SETTINGS, base_pigments=None):
+    """Every target film predicted by a library built without it (see the module docstring).
+
+    Parameters
+    ----------
+    measurements : dict
+        Film id -> MeasurementSet with its recipe (e.g. :func:`bayespig.data.read_revigo`).
+    targets : sequence of str, optional
+        Default: every film with two or more pigments.
+    models : sequence of str
+        Film models (``"radiative-transfer"``, ``"kubelka-munk"``): the same protocol for each.
+    seed : int
+    executor : concurrent.futures.Executor, optional
+        Runs the builds (default a local pool of two processes).
+    progress : callable, optional
+        Called with one line per finished film.
+    n_draws : int
+    settings : InferenceSettings
+        Sampler settings of every build (default :data:`LOO_SETTINGS`).
+    base_pigments : sequence of str, optional
+        As for :func:`bayespig.build_library` (default: present in >= a quarter of the films).
+
+    Returns
+    -------
+    tuple
+        ``(predictions, info)``: the :class:`FilmPrediction` of every (model, target), and a dict
+        (base pigments and films, seconds).
+    """
+    sets = dict(measurements)
+    recipes = film_recipes(sets)
+    base = tuple(_base_pigments(recipes) if base_pigments is None else base_pigments)
+    targets = sorted(f for f, r in recipes.items() if len(r.amounts) >= 2) if targets is None else list(targets)
+    unknown = [f for f in targets if f not in sets]
+    if unknown:
+        raise ValueError(f"targets: {unknown[0]!r} is not among the measurements")
+    say = progress or (lambda message: None)
+    started = time.perf_counter()
+    portable = _portable(sets)
+    plans = {f: training_films(recipes, f, base) for f in targets}
+    base_films = sorted({g for base_only, others in plans.values() if others for g in base_only})
+    results = []
+    with executor_or_local_pool(executor) as pool:
+        bases = {}
+        if base_films:
+            futures = {m: pool.submit(_build, (portable, base_films, m, seed, None, settings)) for m in models}
+            bases = {m: future.result() for m, future in futures.items()}
+            say(f"base libraries ({', '.join(base) or 'none'} from {', '.join(base_films)}) built: "
+                f"{time.perf_counter() - started:.0f} s")
+        tasks = []
+        for m in models:
+            for f in targets:
+                base_only, others = plans[f]
+                if others:  # the target adds pigments to the base: share the base library
+                    tasks.append((portable, f, m, seed, n_draws, others, bases[m], settings))
+                else:  # a base-only target: its library is built without it from the others
+                    tasks.append((portable, f, m, seed, n_draws, base_only, None, settings))
+        futures = [pool.submit(_predict_film, task) for task in tasks]
+        for i, future in enumerate(futures, 1):
+            p = future.result()
+            results.append(p)
+            say(f"[{i}/{len(tasks)}] {p.model} {p.film_id}: ΔE00 " + " / ".join(f"{d:.2f}" for d in p.delta_E)
+                + f" ({', '.join(p.cards)}), {p.seconds:.0f} s; {time.perf_counter() - started:.0f} s in all")
+    return tuple(results), {"base_pigments": list(base), "base_films": base_films,
+                            "seconds": time.perf_counter() - started}
+
+
+def coverage(predictions, wavelength_nm, *, level=DEFAULT_LEVEL, seed=0):
+    """Whether each held-out film lies in its predictive region, the model error learned without it.
+
+    Returns
+    -------
+    tuple
+        ``(counts, inside, radius)``: model -> (inside, total) over every (film, card);
+        (model, film) -> bools per card; (model, film) -> ΔE00 radii per card.
+    """
+    inside, radius, counts = {}, {}, {}
+    rng = np.random.default_rng(seed)
+    for model in sorted({p.model for p in predictions}):
+        own = [p for p in predictions if p.model == model]
+        hits = total = 0
+        for p in own:
+            others = [q.residuals for q in own if q.film_id != p.film_id]
+            if not others:
+                continue
+            covariance = model_error_from_residuals(np.concatenate(others))
+            flags, radii = [], []
+            for k in range(p.draws.shape[0]):
+                R = p.draws[k]
+                noise = rng.multivariate_normal(np.zeros(covariance.shape[0]), covariance, R.shape[0], method="eigh")
+                R = np.clip(R * (1.0 + noise), 0.0, None)
+                lab = colorimetry.reflectance_to_Lab(R, wavelength_nm)
+                centre = colorimetry.reflectance_to_Lab(np.median(R, axis=0), wavelength_nm)
+                r = float(np.quantile(colorimetry.delta_E2000(lab, centre), level))
+                measured = colorimetry.reflectance_to_Lab(p.measured[k], wavelength_nm)
+                flag = bool(colorimetry.delta_E2000(measured, centre) <= r)
+                flags.append(flag)
+                radii.append(r)
+                hits += flag
+                total += 1
+            inside[(model, p.film_id)] = tuple(flags)
+            radius[(model, p.film_id)] = tuple(radii)
+        counts[model] = (hits, total)
+    return counts, inside, radius
+
+
+def cross_validate(library, measurements, *, seed=0, executor=None, progress=None, settings=LOO_SETTINGS,
+                   targets=None):
+    """``library`` with the model error learned by leaving out each mixture film of ``measurements``.
+
+    Parameters
+    ----------
+    library : PigmentLibrary
+        Built from ``measurements`` (its model is the one cross-validated).
+    measurements : dict
+        The films it was built from.
+
+    Returns
+    -------
+    tuple
+        ``(library with model_error set, predictions)``.
+    """
+    predictions, _ = leave_one_out(measurements, targets=targets, models=(library.model,), seed=seed,
+                                   executor=executor, progress=progress, settings=settings,
+                                   base_pigments=library.provenance.get("base_pigments"))
+    if len(predictions) < 2:
+        raise ValueError("cross-validation needs at least two mixture films")
+    covariance = model_error_from_residuals(np.concatenate([p.residuals for p in predictions]))
+    provenance = dict(library.provenance, model_error={
+        "method": "leave one film out (bayespig.library.validation)", "films": [p.film_id for p in predictions],
+        "seed": int(seed), "settings": dataclasses.asdict(settings)})
+    return dataclasses.replace(library, model_error=covariance, provenance=provenance), predictions

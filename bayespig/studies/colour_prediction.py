@@ -1,0 +1,246 @@
+"""Colour prediction on real films: leave one film out, bayespig's library against Kubelka-Munk's.
+
+Protocol (identical for both models; only the film model of the library differs,
+:mod:`bayespig.library.film_models`). Data: the Revigo films (Geldof et al. 2018), each
+measured over its own black and white card on an 8°/d sphere.
+
+1. **Targets**: every mixture film of series 01-15 (the B-F films: tints with zinc white,
+   shades with bone black, and series 07's zinc-white/bone-black greys); masstones are not
+   targets (they are what a palette is made of).
+2. **Leave one film out**: for each target ``X`` a library is built *without* ``X``
+   (:func:`bayespig.build_library`, the same staged joint posterior for both models) from the
+   films that carry the pigments ``X`` needs: series 07's zinc-white/bone-black films (the base
+   pigments) and the other films of ``X``'s series. Other series only add pigments ``X`` does
+   not contain.
+3. **Prediction** of ``X`` over both of its measured cards from its recipe (appendix A2
+   concentrations with the library's densities). ``X``'s film thickness is unknown; two
+   variants:
+
+   * ``fitted`` (headline): the one free scalar, ``h``, fitted to ``X``'s two spectra by least
+     squares in relative deviation with the median constants (everything else is predicted;
+     the tint study of issue 9 used the same rule);
+   * ``unknown``: ``h`` drawn from the spread of the library's own films (nothing of ``X``
+     used but its recipe and cards).
+4. **Score**: CIEDE2000 between the median predicted spectrum and the measured one over each
+   card (D65, CIE 1964 10°).
+5. **Model error and coverage**: the relative residuals ``measured / predicted - 1`` of all
+   held-out films give the model-error covariance over wavelengths
+   (:func:`bayespig.library.predict.model_error_from_residuals`). For the coverage of ``X``'s
+   90 % region the covariance comes from the *other* films only (no film calibrates its own
+   region), and the region is that of :func:`bayespig.predict_paint`: posterior draws of the
+   constants times the model error.
+6. **Matching**: each target matched from its leave-one-out library with its own pigments
+   allowed (:func:`bayespig.match_paint`, its over-white spectrum as the target, thickness
+   fitted): recovered mass fractions against the recipe and the ΔE00 of the match.
+
+References
+----------
+Geldof, Proaño Gaibor, Ligterink, Hendriks, Kirchner (2018), Heritage Science 6:17.
+Ershov, Voloboy & Pozdnyakov (2023), section 2, appendix A2.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+
+import numpy as np
+
+from ..data.spectral_table import read_revigo
+from ..library.recipes import film_recipes
+from ..library.validation import LOO_SETTINGS, N_DRAWS, coverage, leave_one_out
+
+__all__ = [
+    "MODELS",
+    "ColourPredictionStudy",
+    "film_class",
+    "colour_prediction_report",
+    "colour_prediction_study",
+    "target_films",
+]
+
+#: The two film models compared, in the library's names.
+MODELS = ("radiative-transfer", "kubelka-munk")
+#: The white and the black of the tints and shades.
+WHITE, BLACK = "ZincWhite", "BoneBlack"
+#: Series of the report (the issue: series 01-15).
+SERIES = tuple(f"{i:02d}" for i in range(1, 16))
+#: The instrument of the Revigo spectra (SCE; see bayespig.studies.revigo.specular_evidence).
+INSTRUMENT = "8d-sce"
+#: Probability content of the predictive regions.
+LEVEL = 0.9
+#: The goal of the issue: bayespig's median ΔE00 at most this share of Kubelka-Munk's per class.
+GOAL_RATIO = 0.8
+#: ... and at most this overall.
+GOAL_OVERALL = 2.0
+#: ... and the coverage of the 90 % regions within this range.
+GOAL_COVERAGE = (0.80, 0.95)
+
+_ID = re.compile(r"^(\d\d)([A-Z])$")
+
+
+def _series(film_id):
+    match = _ID.match(film_id)
+    return match.group(1) if match else None
+
+
+def film_class(recipe):
+    """``"black shade"`` (bone black in it), ``"white tint"`` (zinc white, no black), or None."""
+    if BLACK in recipe.amounts:
+        return "black shade"
+    if WHITE in recipe.amounts:
+        return "white tint"
+    return None
+
+
+def target_films(sets, recipes, series=SERIES):
+    """The mixture films of ``series`` (two or more pigments with a class), in id order."""
+    out = []
+    for film_id in sorted(sets):
+        recipe = recipes.get(film_id)
+        if _series(film_id) in series and recipe is not None and len(recipe.amounts) >= 2 \
+                and film_class(recipe) is not None:
+            out.append(film_id)
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class ColourPredictionStudy:
+    """All held-out predictions (:class:`bayespig.library.validation.FilmPrediction`), with the
+    coverage of the 90 % regions."""
+
+    predictions: tuple
+    classes: dict  # film id -> "white tint" | "black shade"
+    coverage: dict  # model -> (inside, total)
+    inside: dict  # (model, film_id) -> (bool over black, bool over white)
+    radius: dict  # (model, film_id) -> (radius over black, radius over white)
+    wavelength_nm: np.ndarray
+    settings: dict
+
+    def of(self, model):
+        return [p for p in self.predictions if p.model == model]
+
+
+def colour_prediction_study(path, *, films=None, models=MODELS, seed=0, executor=None, progress=None,
+                            n_draws=N_DRAWS, settings=LOO_SETTINGS):
+    """Run the leave-one-film-out study (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The Revigo folder.
+    films : sequence of str, optional
+        Targets (default :func:`target_films`).
+    models : sequence of str
+    seed : int
+    executor : concurrent.futures.Executor, optional
+        Runs the leave-one-out builds (default a local pool of two processes).
+    progress : callable, optional
+        Called with one line per finished film.
+    n_draws : int
+    settings : InferenceSettings
+        Sampler settings of every build.
+
+    Returns
+    -------
+    ColourPredictionStudy
+    """
+    sets = read_revigo(path)
+    recipes = film_recipes(sets)
+    targets = list(target_films(sets, recipes)) if films is None else list(films)
+    unknown = [f for f in targets if f not in sets]
+    if unknown:
+        raise ValueError(f"films: {unknown[0]!r} is not a film of {path}")
+    predictions, info = leave_one_out(sets, targets=targets, models=models, seed=seed, executor=executor,
+                                      progress=progress, n_draws=n_draws, settings=settings,
+                                      base_pigments=(WHITE, BLACK))
+    wl = np.asarray(sets[targets[0]].wavelength_nm, dtype=float) if targets else np.array([])
+    counts, inside, radius = coverage(predictions, wl, level=LEVEL, seed=seed)
+    record = {"seed": seed, "n_draws": n_draws, "instrument": INSTRUMENT, "level": LEVEL, "models": list(models),
+              "sampler": dataclasses.asdict(settings), **info}
+    return ColourPredictionStudy(predictions, {f: film_class(recipes[f]) for f in targets}, counts, inside, radius,
+                                 wl, record)
+
+
+def _median(values):
+    return float(np.median(values)) if len(values) else float("nan")
+
+
+def class_medians(study, model, variant="fitted"):
+    """Median ΔE00 per class and overall, over both cards of every film of ``model``."""
+    out = {}
+    for cls in ("white tint", "black shade", None):
+        values = []
+        for p in study.of(model):
+            if cls is None or study.classes.get(p.film_id) == cls:
+                values.extend(p.delta_E if variant == "fitted" else p.delta_E_unknown)
+        out[cls or "overall"] = _median(values)
+    return out
+
+
+def colour_prediction_report(study, *, command="bayespig colour-prediction"):
+    """The Markdown of ``reports/colour-prediction.md``."""
+    rt, km = MODELS
+    lines = ["# Colour prediction on real films: bayespig's pigment library against Kubelka-Munk", "",
+             f"Regenerate: `{command}`.", "",
+             "Every mixture film of the Revigo series 01-15 (Geldof et al. 2018) is predicted from its recipe by a "
+             "library built **without it** (leave one film out), over its black and its white card, by bayespig's "
+             "radiative-transfer library and by a two-constant Kubelka-Munk library (Saunderson correction) built "
+             "from the same films by the same staged posterior. Protocol: the module docstring of "
+             "`bayespig.studies.colour_prediction`. ΔE00 under D65, CIE 1964 10°.", ""]
+    lines += ["## Median ΔE00", "", "| thickness | model | white tints | black shades | overall |", "|---|---|---|---|---|"]
+    for variant in ("fitted", "unknown"):
+        for model in (rt, km):
+            m = class_medians(study, model, variant)
+            lines.append(f"| {variant} | {model} | {m['white tint']:.2f} | {m['black shade']:.2f} | {m['overall']:.2f} |")
+    m_rt, m_km = class_medians(study, rt), class_medians(study, km)
+    goals = []
+    for cls in ("white tint", "black shade"):
+        ratio = m_rt[cls] / m_km[cls] if m_km[cls] > 0 else float("nan")
+        goals.append(f"{cls}s: bayespig / Kubelka-Munk = {ratio:.2f} (goal <= {GOAL_RATIO}) — "
+                     f"{'met' if ratio <= GOAL_RATIO else 'not met'}")
+    goals.append(f"overall: bayespig {m_rt['overall']:.2f} (goal <= {GOAL_OVERALL}) — "
+                 f"{'met' if m_rt['overall'] <= GOAL_OVERALL else 'not met'}")
+    lines += ["", "Goals (fitted thickness): " + "; ".join(goals) + ".", ""]
+    lines += ["## Coverage of the 90 % predictive regions", "",
+              "The model error of film X's region is learned from the residuals of the other held-out films only.", "",
+              "| model | inside / total | coverage |", "|---|---|---|"]
+    for model, (hits, total) in study.coverage.items():
+        lines.append(f"| {model} | {hits} / {total} | {hits / total:.0%} |")
+    lo, hi = GOAL_COVERAGE
+    lines += ["", f"Goal: between {lo:.0%} and {hi:.0%}.", ""]
+    lines += ["## Every film", "",
+              "| film | class | recipe | bayespig ΔE00 black / white | KM ΔE00 black / white | bayespig h | "
+              "inside 90 % (bayespig) | worst band (bayespig) |", "|---|---|---|---|---|---|---|---|"]
+    km_of = {p.film_id: p for p in study.of(km)}
+    for p in sorted(study.of(rt), key=lambda q: q.film_id):
+        k = km_of.get(p.film_id)
+        recipe = ", ".join(f"{name} {share:.3f}" for name, share in p.recipe.items())
+        flags = study.inside.get((rt, p.film_id), (False, False))
+        lines.append(f"| {p.film_id} | {study.classes.get(p.film_id)} | {recipe} | {p.delta_E[0]:.2f} / {p.delta_E[1]:.2f} | "
+                     + (f"{k.delta_E[0]:.2f} / {k.delta_E[1]:.2f}" if k else "—")
+                     + f" | {p.thickness:.3g} | {'/'.join('yes' if f else 'no' for f in flags)} | {p.worst_band_nm:g} nm |")
+    worst = sorted(study.of(rt), key=lambda q: -max(q.delta_E))[:5]
+    lines += ["", "## The worst films", ""]
+    for p in worst:
+        band = p.worst_band_nm
+        sign = np.sign(p.residuals[:, np.argmin(np.abs(study.wavelength_nm - band))])
+        side = ["darker than predicted" if s < 0 else "lighter than predicted" for s in sign]
+        lines.append(f"- **{p.film_id}** ({study.classes.get(p.film_id)}, ΔE00 {p.delta_E[0]:.2f} / {p.delta_E[1]:.2f}): the largest "
+                     f"relative residual at {band:g} nm (over black {side[0]}, over white {side[1]}); fitted thickness "
+                     f"{p.thickness:.3g}{'; its library did not converge' if not p.converged else ''}.")
+    lines += ["", "## Matching", "",
+              "Each target matched from its leave-one-out library with its own pigments allowed (target: its "
+              "over-white spectrum; thickness fitted).", "",
+              "| model | median abs. error of mass fraction | median ΔE00 of the match |", "|---|---|---|"]
+    for model in (rt, km):
+        errors, dEs = [], []
+        for p in study.of(model):
+            for name, share in p.recipe.items():
+                errors.append(abs(p.match_fractions.get(name, 0.0) - share))
+            dEs.append(p.match_delta_E)
+        lines.append(f"| {model} | {_median(errors):.3f} | {_median(dEs):.2f} |")
+    s = study.settings
+    lines += ["", f"Settings: seed {s['seed']}, {s['n_draws']} draws per prediction, instrument {s['instrument']}, "
+              f"level {s['level']}.", ""]
+    return "\n".join(lines)

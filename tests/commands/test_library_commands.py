@@ -1,0 +1,73 @@
+"""``bayespig predict`` and ``bayespig match`` on a saved library; the recipe and spectrum arguments."""
+
+import numpy as np
+import pytest
+
+from bayespig.cli import main
+from bayespig.commands.library import recipe_argument, spectrum_argument
+from bayespig.library.library import PigmentLibrary
+
+WL = np.arange(400.0, 701.0, 50.0)
+PIGMENTS = ("ZincWhite", "PrussianBlue")
+
+
+@pytest.fixture(scope="module")
+def library_file(tmp_path_factory):
+    a = np.stack([np.full(WL.size, 0.002), 0.02 + 0.5 / (1 + np.exp(-(WL - 560) / 20))], axis=1)
+    c = np.empty((32, WL.size, 2, 2))
+    c[..., 0] = a
+    c[..., 1] = np.log([1.0, 3.0])
+    library = PigmentLibrary(model="radiative-transfer", pigments=PIGMENTS, wavelength_nm=WL, constants=c,
+                             constant_names=("a", "log_sigma"), thickness_prior=(0.0, 0.2), films=(), film_ids=(),
+                             thickness=np.zeros((32, 0)), densities=None, model_error=None,
+                             provenance={"seed": 0}, stages=())
+    path = tmp_path_factory.mktemp("lib") / "library.nc"
+    library.save(path)
+    return path
+
+
+def test_recipe_argument():
+    assert recipe_argument("ZincWhite:90, PrussianBlue:10") == {"ZincWhite": 90.0, "PrussianBlue": 10.0}
+    with pytest.raises(ValueError, match=r"--recipe: cannot read 'ZincWhite'"):
+        recipe_argument("ZincWhite")
+    with pytest.raises(ValueError, match="--recipe: the amount of 'ZincWhite' is not a number: 'lots'"):
+        recipe_argument("ZincWhite:lots")
+    with pytest.raises(ValueError, match="--recipe: 'ZincWhite' is given twice"):
+        recipe_argument("ZincWhite:1,ZincWhite:2")
+
+
+def test_spectrum_argument(tmp_path):
+    np.testing.assert_array_equal(spectrum_argument("0.05", WL, "--substrate"), np.full(WL.size, 0.05))
+    path = tmp_path / "card.csv"
+    path.write_text("wavelength_nm,reflectance\n" + "".join(f"{w:g},0.8\n" for w in np.arange(400, 701, 10)))
+    np.testing.assert_allclose(spectrum_argument(str(path), WL, "--substrate"), 0.8)
+    path.write_text("wavelength_nm,reflectance\n400,0.8\n450,-0.1\n")
+    with pytest.raises(ValueError, match=r"card.csv, row 3, field 'reflectance': must be a fraction in \[0, 1.5\], "
+                                         "got -0.1"):
+        spectrum_argument(str(path), WL, "--substrate")
+    with pytest.raises(ValueError, match="--substrate: a reflectance must be a fraction in"):
+        spectrum_argument("5", WL, "--substrate")
+
+
+def test_predict_prints_the_colour_and_its_region(library_file, capsys, tmp_path):
+    out = tmp_path / "spectrum.csv"
+    assert main(["predict", str(library_file), "--recipe", "ZincWhite:70,PrussianBlue:30", "-q",
+                 "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "CIELAB L*" in text and "credible region: ΔE00 <=" in text
+    assert "the library has no cross-validated model error" in text
+    assert out.read_text().splitlines()[1] == "wavelength_nm,reflectance_median,reflectance_q05,reflectance_q95"
+
+
+def test_predict_refuses_an_unknown_pigment_in_one_line(library_file, capsys):
+    assert main(["predict", str(library_file), "--recipe", "Vermillion:1", "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["bayespig: error: recipe: pigment 'Vermillion' is not in the library (it has ZincWhite, "
+                   "PrussianBlue)"]
+
+
+def test_match_a_lab_target(library_file, capsys):
+    assert main(["match", str(library_file), "--lab", "60,-10,-30", "-q"]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("recipe (mass fractions): ")
+    assert "equally good matches" in text

@@ -1,0 +1,237 @@
+"""The pigment library build (bayespig.library.build): recovery of known constants from
+simulated films of known recipes, the stage plan, save/load."""
+
+import contextlib
+import dataclasses
+import io
+import re
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from bayespig.data import simulate
+from bayespig.data.simulate import FilmSpec
+from bayespig.inference import InferenceSettings
+from bayespig.library import PigmentLibrary, build_library, load_library, stage_plan
+from bayespig.library.recipes import Recipe
+from bayespig.table import load_table
+
+WAVELENGTHS = np.array([450.0, 550.0, 650.0])
+EPS = 0.01
+#: The true constants per pigment and wavelength: a (relative absorption) and sigma (optical
+#: thickness per unit concentration at h = 1).
+TRUTH = {
+    "White": (np.array([0.004, 0.002, 0.003]), np.array([5.0, 4.5, 4.0])),
+    "Black": (np.array([0.85, 0.82, 0.80]), np.array([150.0, 140.0, 130.0])),
+    "Red": (np.array([0.70, 0.40, 0.03]), np.array([25.0, 20.0, 12.0])),
+    "Blue": (np.array([0.10, 0.50, 0.80]), np.array([8.0, 15.0, 30.0])),
+}
+#: Recipes (mass fractions): masstones, tints with the white, shades with the black.
+RECIPES = {
+    "W": {"White": 1.0},
+    "WB1": {"White": 0.97, "Black": 0.03},
+    "WB2": {"White": 0.90, "Black": 0.10},
+    "R": {"Red": 1.0},
+    "RW1": {"Red": 0.1, "White": 0.9},
+    "RW2": {"Red": 0.5, "White": 0.5},
+    "RB": {"Red": 0.9, "Black": 0.1},
+    "U": {"Blue": 1.0},
+    "UW": {"Blue": 0.3, "White": 0.7},
+}
+#: Films' measured thicknesses: the truth is the measurement times exp(N(0, MEASURED_SD^2)),
+#: the prior's own spread (FilmThickness, MEASURED_RELATIVE_SD), so that the truth is a draw
+#: from the prior.
+MEASURED_SD = 0.1
+#: Unit densities: the simulation's concentrations are the mass fractions (appendix A2 with equal
+#: densities; the handbook fallback for unknown names would scale every sigma by 1 / 3.32).
+DENSITIES = {p: 1.0 for p in TRUTH}
+QUICK = InferenceSettings(target_ess=400.0, draws_per_chain=256, max_steps=20000)
+#: Nominal coverage of the 90 % intervals and the tolerance: with n constants the count inside is
+#: Binomial(n, 0.9) for independent constants; we accept any count above the binomial's 0.1 %
+#: quantile (the constants of one pigment share its films' thicknesses, so the count is more
+#: spread than binomial; the cut posterior's fixed earlier pigments make it somewhat narrower).
+COVERAGE, COVERAGE_QUANTILE = 0.9, 0.001
+
+
+def _film(name, recipe, h, seed, table):
+    weight = {p: f * TRUTH[p][1] for p, f in recipe.items()}
+    total = sum(weight.values())
+    a = sum(TRUTH[p][0] * w for p, w in weight.items()) / total
+    ms = simulate(a=a, tau=h * total, design=[
+        FilmSpec(f"{name}_ob", substrate=0.05, film_group=name, measure_substrate=True),
+        FilmSpec(f"{name}_ow", substrate=0.85, film_group=name, measure_substrate=True)],
+        instrument="8d-sce", wavelengths=WAVELENGTHS, eps=EPS, seed=seed, model=table)
+    pigments = sorted(recipe)
+    metadata = dict(ms.metadata, composition={"pigments": pigments, "mass_ratios": [recipe[p] for p in pigments]})
+    return dataclasses.replace(ms, metadata=metadata)
+
+
+@pytest.fixture(scope="module")
+def simulated():
+    table = load_table("8d-sce", progress=False)
+    rng = np.random.default_rng(2024)
+    measured = {name: float(np.exp(rng.normal(0.0, 0.3))) for name in RECIPES}
+    truth_h = {name: h * float(np.exp(rng.normal(0.0, MEASURED_SD))) for name, h in measured.items()}
+    sets = {name: _film(name, recipe, truth_h[name], 100 + k, table) for k, (name, recipe) in enumerate(RECIPES.items())}
+    return sets, measured, truth_h
+
+
+@pytest.fixture(scope="module")
+def built(simulated):
+    """The library and its progress lines (stderr)."""
+    sets, measured, _ = simulated
+    lines = io.StringIO()
+    with contextlib.redirect_stderr(lines):
+        library = build_library(sets, seed=3, progress=True, eps=EPS, thickness=measured, settings=QUICK,
+                                base_pigments=["White", "Black"], densities=DENSITIES)
+    return library, lines.getvalue().splitlines()
+
+
+@pytest.fixture(scope="module")
+def library(built):
+    return built[0]
+
+
+def test_progress_says_each_stage(built):
+    """One line per stage group (pigments, films, steps, R-hat, ESS, time), as it completes (stage
+    2's two groups run in a local pool of 2 processes), and one per stage."""
+    library, lines = built
+    assert len(lines) == 5
+    group_lines = lines[:1] + lines[2:4]
+    expected = []
+    for stage in library.stages:
+        expected.append(f"library stage {stage['stage']}/2: {', '.join(stage['pigments'])} from "
+                        f"{len(stage['films'])} films: {stage['n_steps']} steps, R-hat <= "
+                        f"{max(stage['thickness_rhat_max'], stage['constants_rhat_max']):.3f}, thickness ESS >= "
+                        f"{stage['thickness_ess_min']:.0f}, {stage['seconds']:.1f} s")
+    assert group_lines[0] == expected[0] and sorted(group_lines[1:]) == sorted(expected[1:])
+    assert re.fullmatch(r"library stage 1/2 done in [0-9.]+ s", lines[1])
+    assert re.fullmatch(r"library stage 2/2 done in [0-9.]+ s", lines[4])
+
+
+def test_the_stage_plan_fits_the_base_then_each_pigment_alone():
+    """Base White and Black from their films, then Red and Blue (two groups) from the films
+    where each is the only unknown; a film whose pigments were all fitted before it is unused.
+    By default every pigment in >= 1/4 of the films is base: here White, Black and Red."""
+    recipes = {name: Recipe(recipe) for name, recipe in RECIPES.items()}
+    stages, unused = stage_plan(recipes, ["White", "Black"])
+    assert stages == [[(("Black", "White"), ("W", "WB1", "WB2"))],
+                      [(("Blue",), ("U", "UW")), (("Red",), ("R", "RB", "RW1", "RW2"))]]
+    assert unused == ()
+    assert stage_plan(recipes) == ([[(("Black", "Red", "White"), ("R", "RB", "RW1", "RW2", "W", "WB1", "WB2"))],
+                                    [(("Blue",), ("U", "UW"))]], ())
+    recipes["RU"] = Recipe({"Red": 0.5, "Blue": 0.5})  # Red and Blue are fitted in stage 2 without it
+    assert stage_plan(recipes, ["White", "Black"])[1] == ("RU",)
+    del recipes["U"], recipes["UW"]  # now RU is the one film of the unknown Blue: a third stage
+    assert stage_plan(recipes, ["White", "Black"])[0][2] == [(("Blue",), ("RU",))]
+    with pytest.raises(ValueError, match=r"base_pigments: \['Green'\] are in no film's recipe"):
+        stage_plan(recipes, ["Green"])
+
+
+def test_the_library_recovers_known_constants(library, simulated):
+    """Every true constant (a and log sigma of 4 pigments at 3 wavelengths) inside its 90 %
+    interval at the nominal rate; every stage converged (not capped, R-hat <= 1.01, the
+    thicknesses' ESS >= 400); the thicknesses' 90 % intervals hold the truth at the nominal rate."""
+    _, _, truth_h = simulated
+    assert isinstance(library, PigmentLibrary)
+    assert library.constants.shape == (QUICK.n_ensembles * QUICK.draws_per_chain, WAVELENGTHS.size, 4, 2)
+    inside = []
+    for j, pigment in enumerate(library.pigments):
+        a, sigma = TRUTH[pigment]
+        for c, truth in enumerate((a, np.log(sigma))):
+            low, high = np.quantile(library.constants[:, :, j, c], [0.05, 0.95], axis=0)
+            inside.extend((low <= truth) & (truth <= high))
+    n = len(inside)
+    assert sum(inside) >= stats.binom(n, COVERAGE).ppf(COVERAGE_QUANTILE), (sum(inside), n)
+    for stage in library.stages:
+        assert not stage["max_steps_reached"]
+        assert stage["thickness_rhat_max"] <= 1.01 and stage["thickness_ess_min"] >= 400
+    low, high = np.quantile(library.thickness, [0.05, 0.95], axis=0)
+    truth = np.array([truth_h[f] for f in library.film_ids])
+    assert ((low <= truth) & (truth <= high)).sum() >= stats.binom(truth.size, COVERAGE).ppf(COVERAGE_QUANTILE)
+    for film in library.films:
+        assert film["used"] and film["rms_log_deviation"] < 3 * EPS
+
+
+def test_save_and_load_round_trip(library, tmp_path):
+    path = library.save(tmp_path / "library.nc")
+    back = load_library(path)
+    np.testing.assert_array_equal(back.constants, library.constants)
+    np.testing.assert_array_equal(back.thickness, library.thickness)
+    np.testing.assert_array_equal(back.wavelength_nm, library.wavelength_nm)
+    for field in ("model", "pigments", "constant_names", "thickness_prior", "films", "film_ids", "densities",
+                  "provenance", "stages", "model_error"):
+        assert getattr(back, field) == getattr(library, field), field
+    assert [p.name for p in tmp_path.iterdir()] == ["library.nc"]  # no temporary left behind
+
+
+def test_load_library_names_a_file_that_is_not_a_library(tmp_path):
+    with pytest.raises(ValueError, match="'.*nothing.nc' cannot be read: file not found"):
+        load_library(tmp_path / "nothing.nc")
+    import arviz as az
+    import xarray as xr
+
+    other = tmp_path / "posterior.nc"
+    az.InferenceData(posterior=xr.Dataset({"a": (("chain", "draw"), np.zeros((1, 3)))})).to_netcdf(str(other))
+    with pytest.raises(ValueError, match="posterior.nc' is not a bayespig pigment library"):
+        load_library(other)
+
+
+def test_bad_arguments():
+    with pytest.raises(TypeError, match="measurements must be a non-empty dict"):
+        build_library([], progress=False)
+    with pytest.raises(ValueError, match="model must be one of"):
+        build_library({"x": None}, model="nonsense", progress=False)
+
+
+def test_a_base_library_serves_later_builds(simulated):
+    """The white and black fitted once (a base library) and shared: a later build fits only the
+    pigment its films add, keeps the base's draws for the base pigments, and recovers the truth."""
+    sets, measured, _ = simulated
+    options = {"seed": 5, "progress": False, "eps": EPS, "settings": QUICK, "densities": DENSITIES}
+    base = build_library({f: sets[f] for f in ("W", "WB1", "WB2")}, thickness={f: measured[f] for f in ("W", "WB1", "WB2")},
+                         **options)
+    assert set(base.pigments) == {"White", "Black"}
+    red_films = ("R", "RW1", "RW2", "RB")
+    library = build_library({f: sets[f] for f in red_films}, thickness={f: measured[f] for f in red_films}, base=base,
+                            **options)
+    assert library.pigments[0] == "Red" and set(library.pigments) == {"Red", "White", "Black"}
+    n = library.constants.shape[0]
+    for pigment in ("White", "Black"):
+        np.testing.assert_array_equal(library.constants[:, :, library.pigments.index(pigment)],
+                                      base.constants[:n, :, base.pigments.index(pigment)])
+    assert [sorted(s["pigments"]) for s in library.stages] == [["Red"], ["Black", "White"]]
+    a, sigma = TRUTH["Red"]
+    inside = []
+    for c, truth in enumerate((a, np.log(sigma))):
+        low, high = np.quantile(library.constants[:, :, 0, c], [0.01, 0.99], axis=0)
+        inside.extend((low <= truth) & (truth <= high))
+    assert sum(inside) >= len(inside) - 1, inside
+    with pytest.raises(ValueError, match="base is a 'radiative-transfer' library; this build is 'kubelka-munk'"):
+        build_library({"R": sets["R"]}, base=base, model="kubelka-munk", progress=False)
+
+
+def test_cross_validation_learns_a_model_error(simulated):
+    """Leave one film out on simulated films: the held-out films are predicted to within the
+    noise (the model is exact here), and the learned model error is of the noise's size."""
+    from bayespig.library.validation import cross_validate, leave_one_out
+
+    sets, _, _ = simulated
+    films = {f: sets[f] for f in ("W", "WB1", "WB2", "R", "RW1", "RW2", "RB")}
+    predictions, info = leave_one_out(films, targets=["RW2", "RB"], seed=2, settings=QUICK, executor=None,
+                                      base_pigments=["White", "Black"])
+    assert info["base_films"] == ["W", "WB1", "WB2"]
+    assert [p.film_id for p in predictions] == ["RW2", "RB"]
+    for p in predictions:
+        assert len(p.cards) == 2
+        # measured = model * (1 + eps xi) with thickness fitted and constants from the other films
+        assert np.abs(p.residuals).max() < 6 * EPS
+        assert np.isnan(p.delta_E).all()  # three bands: no colour
+    library = build_library({f: films[f] for f in ("W", "WB1", "WB2", "R", "RW1")}, seed=1, progress=False, eps=EPS,
+                            settings=QUICK, base_pigments=["White", "Black"], densities=DENSITIES)
+    validated, _ = cross_validate(library, {f: films[f] for f in ("W", "WB1", "WB2", "R", "RW1")},
+                                  targets=["WB1", "RW1"], settings=QUICK, executor=None)
+    sd = np.sqrt(np.diag(validated.model_error))
+    assert validated.model_error.shape == (WAVELENGTHS.size,) * 2
+    assert np.all(sd < 6 * EPS) and np.all(sd > 0)
