@@ -18,6 +18,9 @@ from ._arguments import add_input_argument, add_output_argument, add_verbosity_a
 __all__ = ["add_library_parsers", "recipe_argument", "spectrum_argument"]
 
 INSTRUMENT_CHOICES = ("8d-sce", "8d-sci", "45-0")
+#: Why the multi-angle built-ins are not among the choices (every instrument option names them all).
+_NOT_MULTI_ANGLE = ("; the multi-angle-45 and multi-angle-45-15 BRDF instruments are not supported by the "
+                    "library's film models")
 
 
 def recipe_argument(text, flag="--recipe"):
@@ -146,10 +149,11 @@ def add_library_parsers(subparsers):
                          "'unknown' (drawn from the library's films)")
     predict.add_argument("--substrate", default=None, help="card reflectance in air: a fraction, a CSV "
                          "(wavelength_nm, reflectance) or SPECTRAL_TABLE:NAME; needed unless opaque")
-    predict.add_argument("--instrument", choices=INSTRUMENT_CHOICES, default="8d-sce")
-    predict.add_argument("--illuminant", default="D65")
-    predict.add_argument("--draws", type=int, default=200)
-    predict.add_argument("--seed", type=int, default=0)
+    predict.add_argument("--instrument", choices=INSTRUMENT_CHOICES, default="8d-sce",
+                         help="instrument of the prediction: 8d-sce (default), 8d-sci or 45-0" + _NOT_MULTI_ANGLE)
+    predict.add_argument("--illuminant", default="D65", help="illuminant of the CIELAB values (default D65)")
+    predict.add_argument("--draws", type=int, default=200, help="predictive draws (default 200)")
+    predict.add_argument("--seed", type=int, default=0, help="seed of the draws (default 0)")
     add_output_argument(predict, "--out", kind="file", default=None, help="CSV of the predicted spectrum")
     add_verbosity_arguments(predict)
     predict.set_defaults(func=run_predict)
@@ -167,10 +171,13 @@ def add_library_parsers(subparsers):
     match.add_argument("--pigments", default=None, help="allowed pigments, comma-separated (default all)")
     match.add_argument("--thickness", default="opaque", help="'opaque' (default), 'fit', or a relative thickness")
     match.add_argument("--substrate", default=None, help="card reflectance (as for predict)")
-    match.add_argument("--instrument", choices=INSTRUMENT_CHOICES, default="8d-sce")
-    match.add_argument("--illuminant", default="D65")
-    match.add_argument("--second-illuminant", default="A")
-    match.add_argument("--seed", type=int, default=0)
+    match.add_argument("--instrument", choices=INSTRUMENT_CHOICES, default="8d-sce",
+                       help="instrument the target was measured with: 8d-sce (default), 8d-sci or 45-0"
+                       + _NOT_MULTI_ANGLE)
+    match.add_argument("--illuminant", default="D65", help="illuminant of the match (default D65)")
+    match.add_argument("--second-illuminant", default="A",
+                       help="illuminant of the metamerism index (default A)")
+    match.add_argument("--seed", type=int, default=0, help="seed of the credible ΔE00 and the spread (default 0)")
     add_verbosity_arguments(match)
     match.set_defaults(func=run_match)
 
@@ -183,7 +190,7 @@ def add_library_parsers(subparsers):
                         help="Markdown report to write")
     study.add_argument("--films", default=None, help="only these targets (comma-separated ids)")
     study.add_argument("--series", default=None, help="only the targets of these series (comma-separated, e.g. 06,12)")
-    study.add_argument("--seed", type=int, default=0)
+    study.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     add_verbosity_arguments(study)
     study.set_defaults(func=run_colour_prediction)
 
