@@ -129,6 +129,41 @@ def add_output_argument(parser, *flags, kind, **kwargs):
 
 
 # ------------------------------------------------------------------------------------- inputs
+def reference_data_folder(path, *, default, variable, name, source, command):
+    """The folder of a reference data set: ``path``, else ``$variable``, else ``default``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike or None
+        The folder the user gave.
+    default : pathlib.Path
+        Where it is looked for otherwise (already resolved from ``$variable`` when set).
+    variable, name, source, command : str
+        The environment variable (e.g. ``"BAYESPIG_REVIGO"``), the data's name ("Revigo"),
+        where they come from, and the command that reads them ("bayespig revigo").
+
+    Raises
+    ------
+    MeasurementError
+        When it does not exist: ``<folder>: file not found``, where it was looked for, where the
+        data come from and how to point at them.
+    """
+    from ..data.errors import MeasurementError, Problem
+
+    folder = Path(path) if path is not None else Path(default)
+    if folder.exists():
+        return folder
+    if path is not None:
+        where = "the folder given"
+    elif os.environ.get(variable):
+        where = f"from ${variable}"
+    else:
+        where = f"the default, ../shared/data/{folder.name} from the working folder"
+    raise MeasurementError(Problem(f"file not found ({where}). The {name} data are {source}; give "
+                                   f"their folder as '{command} FOLDER' or set {variable}=FOLDER",
+                                   file=str(folder)))
+
+
 def check_input_path(path):
     """Say in plain words, before any work, why ``path`` is not a measurement input.
 

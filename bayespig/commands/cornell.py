@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import os
 import sys
-from pathlib import Path
 
-from ._arguments import add_output_argument, add_verbosity_arguments
+from ._arguments import add_output_argument, add_verbosity_arguments, reference_data_folder
 
 __all__ = ["CORNELL_SOURCE", "add_cornell_parser", "cornell_folder", "run_cornell"]
 
@@ -54,21 +52,10 @@ def cornell_folder(path=None):
         When it does not exist: where it was looked for, where the data come from and how to
         point at them.
     """
-    from ..data.errors import MeasurementError, Problem
     from ..studies.cornell import default_cornell_path
 
-    folder = Path(path) if path is not None else default_cornell_path()
-    if folder.exists():
-        return folder
-    if path is not None:
-        where = "the folder given"
-    elif os.environ.get("BAYESPIG_CORNELL"):
-        where = "from $BAYESPIG_CORNELL"
-    else:
-        where = "the default, ../shared/data/cornell from the working folder"
-    raise MeasurementError(Problem(f"file not found ({where}). The Cornell data are {CORNELL_SOURCE}; give "
-                                   "their folder as 'bayespig cornell FOLDER' or set BAYESPIG_CORNELL=FOLDER",
-                                   file=str(folder)))
+    return reference_data_folder(path, default=default_cornell_path(), variable="BAYESPIG_CORNELL", name="Cornell",
+                                 source=CORNELL_SOURCE, command="bayespig cornell")
 
 
 def run_cornell(args):

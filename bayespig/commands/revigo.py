@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import os
 import sys
-from pathlib import Path
 
 import numpy as np
 
-from ._arguments import add_output_argument, add_verbosity_arguments
+from ._arguments import add_output_argument, add_verbosity_arguments, reference_data_folder
 
 __all__ = ["REVIGO_SOURCE", "add_revigo_parser", "revigo_folder", "run_revigo"]
 
@@ -66,21 +64,10 @@ def revigo_folder(path=None):
         When it does not exist: ``<folder>: file not found``, where it was looked for, where the
         data come from and how to point at them.
     """
-    from ..data.errors import MeasurementError, Problem
     from ..studies.revigo import default_revigo_path
 
-    folder = Path(path) if path is not None else default_revigo_path()
-    if folder.exists():
-        return folder
-    if path is not None:
-        where = "the folder given"
-    elif os.environ.get("BAYESPIG_REVIGO"):
-        where = "from $BAYESPIG_REVIGO"
-    else:
-        where = "the default, ../shared/data/revigo from the working folder"
-    raise MeasurementError(Problem(f"file not found ({where}). The Revigo data are {REVIGO_SOURCE}; give "
-                                   "their folder as 'bayespig revigo FOLDER' or set BAYESPIG_REVIGO=FOLDER",
-                                   file=str(folder)))
+    return reference_data_folder(path, default=default_revigo_path(), variable="BAYESPIG_REVIGO", name="Revigo",
+                                 source=REVIGO_SOURCE, command="bayespig revigo")
 
 
 def run_revigo(args):
