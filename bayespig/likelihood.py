@@ -452,12 +452,19 @@ class ForwardModel:
         instrument)`` and, at this roughness, under the instrument
         (:class:`~bayespig.rough_table.FixedRoughnessTable`); :class:`WavelengthModel` then
         also takes a roughness per row.
+    binder_index_free : bool
+        Also load the rough tables at every binder-index node
+        (:func:`bayespig.rough_table.load_binder_index_tables`, held in ``tables`` under
+        ``("rough-n", instrument)``), so that :class:`WavelengthModel` takes a binder index per
+        row as well (the index as a parameter, :mod:`bayespig.inference.roughness`). Needs
+        ``roughness > 0``.
     """
 
     problem: Problem
     g: str = "isotropic"
     tables: dict = field(default_factory=dict)
     roughness: float = 0.0
+    binder_index_free: bool = False
 
     def __post_init__(self):
         from .table import load_table
@@ -465,6 +472,9 @@ class ForwardModel:
         if self.g not in ("isotropic", "free"):
             raise ValueError(f"g must be 'isotropic' or 'free', got {self.g!r}")
         self.roughness = surface_roughness(self.roughness)
+        if self.binder_index_free and not self.rough:
+            raise ValueError("a binder index per row needs roughness > 0 (the look-up tables over n are those "
+                             "of a rough surface)")
         if self.rough:
             self._rough_tables()
             return
@@ -498,7 +508,10 @@ class ForwardModel:
         if self.g != "isotropic":
             raise ValueError("roughness > 0 needs g='isotropic' (the look-up tables of a rough surface are "
                              "isotropic)")
+        from .rough_table import load_binder_index_tables
+
         self._film_tables, self._rough = [], []
+        self.binder_index_tables = {}  # rough table key -> BinderIndexRoughTables of its instrument
         for film in self.problem.films:
             if film.kind == "transmittance" or not film.opaque:
                 raise ValueError(f"film {film.name!r} does not hide its substrate: roughness > 0 is available "
@@ -514,6 +527,12 @@ class ForwardModel:
                 self.tables[film.instrument] = table
             self._film_tables.append(table)
             self._rough.append(rough)
+            if self.binder_index_free:
+                family = self.tables.get(("rough-n", film.instrument))
+                if family is None:
+                    family = load_binder_index_tables(film.instrument, progress=False)
+                    self.tables[("rough-n", film.instrument)] = family
+                self.binder_index_tables[rough.key] = family
         self.table_keys = tuple(sorted({t.key for t in self._film_tables}))
         self._stencils = {}
 
@@ -523,6 +542,15 @@ class ForwardModel:
         if not self.rough:
             return None
         return (max(t.alpha_min for t in self._rough), min(t.alpha_max for t in self._rough))
+
+    @property
+    def binder_index_range(self):
+        """``(n_min, n_max)`` the binder-index tables of every film cover (None unless
+        ``binder_index_free``)."""
+        if not (self.rough and self.binder_index_free):
+            return None
+        families = self.binder_index_tables.values()
+        return (max(f.n_min for f in families), min(f.n_max for f in families))
 
     @property
     def film_tables(self):
@@ -672,7 +700,7 @@ class WavelengthModel:
             start = stop
         self._tau_min = min([u[0].tau_min for u in self._units.values() if u[1] >= 0], default=0.0)
 
-    def __call__(self, a, tau, g=None, r_s_scale=None, member=None, roughness=None):
+    def __call__(self, a, tau, g=None, r_s_scale=None, member=None, roughness=None, binder_index=None):
         """Predicted values, shape (W, n_values).
 
         Parameters
@@ -695,9 +723,15 @@ class WavelengthModel:
             for every film of the set; the roughness as a parameter, see
             :mod:`bayespig.inference.roughness`), in the rough tables' range; None for the
             model's own :attr:`ForwardModel.roughness`. Needs a rough model (``roughness > 0``).
+        binder_index : numpy.ndarray, optional
+            Shape (W,) or (W, 1): binder index ``n`` of the films per row [-] (the index as a
+            parameter), in the binder-index tables' range; with ``roughness``. None for the
+            problem's own ``n``. Needs ``ForwardModel(binder_index_free=True)``.
         """
+        if binder_index is not None and roughness is None:
+            raise ValueError("binder_index per row needs roughness per row as well")
         if roughness is not None:
-            return self._call_rough(a, roughness, member)
+            return self._call_rough(a, roughness, member, binder_index)
         a = np.asarray(a, dtype=float)
         tau = np.asarray(tau, dtype=float).reshape(a.shape[0], -1)
         g = None if g is None else np.asarray(g, dtype=float)
@@ -739,26 +773,42 @@ class WavelengthModel:
                                                      r_s_scale[rows])
         return out
 
-    def _call_rough(self, a, roughness, member):
-        """Predictions with a roughness per row (opaque films under a rough surface)."""
+    @staticmethod
+    def _per_row(name, value, n_rows):
+        """A per-row input (W,) from shape (W,) or (W, 1), checked."""
+        column = np.asarray(value, dtype=float).reshape(n_rows, -1)
+        if column.shape[1] != 1:
+            raise ValueError(f"{name} must have one value per row, shape ({n_rows},) or ({n_rows}, 1), "
+                             f"got {np.shape(value)}")
+        return column[:, 0]
+
+    def _call_rough(self, a, roughness, member, binder_index=None):
+        """Predictions with a roughness (and a binder index) per row (opaque films under a rough surface)."""
         if not self.model.rough:
             raise ValueError("roughness per row needs a ForwardModel with roughness > 0 (the look-up tables "
                              "of a rough surface)")
+        if binder_index is not None and not self.model.binder_index_free:
+            raise ValueError("binder_index per row needs a ForwardModel with binder_index_free=True (the "
+                             "look-up tables over n)")
         a = np.asarray(a, dtype=float)
-        alpha = np.asarray(roughness, dtype=float).reshape(a.shape[0], -1)
-        if alpha.shape[1] != 1:
-            raise ValueError(f"roughness must have one value per row, shape ({a.shape[0]},) or "
-                             f"({a.shape[0]}, 1), got {np.shape(roughness)}")
-        alpha = alpha[:, 0]
+        alpha = self._per_row("roughness", roughness, a.shape[0])
+        n = None if binder_index is None else self._per_row("binder_index", binder_index, a.shape[0])
         _stack_members(member, a.shape[0], self.indices.size)
         out = np.empty((a.shape[0], self.n_values)) if len(self._rough_units) > 1 or any(
             len(parts) > 1 for _, parts in self._rough_units.values()) else None
-        # the lobe depends on the roughness alone: once per distinct value (one per walker)
-        distinct, inverse = np.unique(alpha, return_inverse=True)
+        # the lobe depends on the surface alone: once per distinct value (one per walker)
+        surface = alpha[:, None] if n is None else np.stack([alpha, n], axis=1)
+        distinct, inverse = np.unique(surface, axis=0, return_inverse=True)
+        inverse = inverse.ravel()
         units = list(self._rough_units.values())
         for rough, parts in units:
-            values = rough.body(a, alpha)
-            values += rough.lobe(distinct)[inverse.ravel()]
+            if n is None:
+                values = rough.body(a, alpha)
+                values += rough.lobe(distinct[:, 0])[inverse]
+            else:
+                family = self.model.binder_index_tables[rough.key]
+                values = family.body(a, alpha, n)
+                values += family.lobe(distinct[:, 0], distinct[:, 1])[inverse]
             if len(units) == 1 and len(parts) == 1 and parts[0] == slice(0, self.n_values):
                 return values  # one film: no copy
             for part in parts:

@@ -17,7 +17,7 @@ from ..likelihood import (
     check_observed,
     multiplicative_normal_logpdf,
 )
-from ..rough_table import ROUGHNESS_MAX, ROUGHNESS_MIN
+from ..rough_table import BINDER_INDEX_NODES, ROUGHNESS_MAX, ROUGHNESS_MIN
 from ..selection import select_measurements
 from .arguments import (
     DEFAULT_EPS,
@@ -38,8 +38,11 @@ from .executors import _WORKER_TABLES, _Task, run_tasks
 from .outputs import _inference_data
 from .roughness import (
     PILOT_DRAWS_PER_CHAIN,
+    BinderIndexSpec,
     NoiseFloorFilmLayout,
     RoughnessSpec,
+    binder_index_argument,
+    binder_index_prior_argument,
     roughness_argument,
     sample_roughness,
 )
@@ -264,7 +267,8 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     check_observed(problem, noise_floor)
     started = time.perf_counter()
     tables = {} if tables is None else tables
-    model = ForwardModel(problem, g=g, tables=tables, roughness=roughness)
+    model = ForwardModel(problem, g=g, tables=tables, roughness=roughness,
+                         binder_index_free=any(isinstance(spec, BinderIndexSpec) for spec in shared))
     log_post0 = LogPosterior(model, 0, priors, g=g, eps=eps, noise_floor=noise_floor)
     _check_eps_identifiable(problem, log_post0)
     n_wl = problem.n_wavelengths
@@ -314,7 +318,7 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
 def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, executor=None,
           progress=True, priors=None, settings=None, substrate_sd=None, noise_floor=None,
           exclude_mirror_deg=None, max_angle_deg=None, wavelengths=None, wavelength_range=None,
-          roughness=None):
+          roughness=None, binder_index=None, binder_index_prior=None):
     """Posterior of ``a`` and ``tau`` (and ``g``, ``eps``) per wavelength from a measurement set.
 
     Parameters
@@ -382,6 +386,16 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         colour moved by 1.8 CIELAB units), and on the real Cornell paints one GGX lobe leaves
         median residuals of 24-44 % (``reports/cornell.md``). Rough surfaces need opaque films
         and isotropic scattering.
+    binder_index : {None, "free"}, optional
+        None: the binder index is the set's ``n`` (``read_measurements(..., n=...)``, 1.45 by
+        default), fixed. ``"free"``: one ``n`` for every film of the set, inferred jointly with
+        the roughness (needs ``roughness="free"``; :class:`~bayespig.inference.roughness.BinderIndexSpec`:
+        normal prior ``binder_index_prior`` truncated to 1.37 .. 1.77, the binder-index tables'
+        range). The posterior then holds ``binder_index`` over ``(chain, draw, surface)``. The
+        first use on a geometry set builds its rough tables at the six index nodes (minutes
+        each; cached).
+    binder_index_prior : (float, float), optional
+        Mean and sd of the binder index's normal prior [-]; default (1.45, 0.05).
 
     Returns
     -------
@@ -422,6 +436,13 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     substrate_sd = check_substrate_sd(substrate_sd)
     noise_floor = noise_floor_argument(noise_floor)
     roughness = roughness_argument(roughness)
+    binder_index = binder_index_argument(binder_index)
+    if binder_index == "free" and roughness != "free":
+        raise ValueError("binder_index='free' needs roughness='free' (the binder index is inferred with the "
+                         f"surface's roughness, on the tables of a rough surface), got roughness={roughness!r}")
+    if binder_index_prior is not None and binder_index != "free":
+        raise ValueError("binder_index_prior is used with binder_index='free' only")
+    index_prior = binder_index_prior_argument(binder_index_prior)
     if isinstance(roughness, float) and roughness > 0 and not ROUGHNESS_MIN <= roughness <= ROUGHNESS_MAX:
         raise ValueError(f"roughness {roughness:g} is outside the range of the look-up tables of a rough surface "
                          f"[{ROUGHNESS_MIN:g}, {ROUGHNESS_MAX:g}] (0 for a smooth surface)")
@@ -455,6 +476,12 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     if roughness == "free":
         nominal, alpha_range = _nominal_roughness(problem, priors, noise_floor)
         shared.append(RoughnessSpec(alpha_range, nominal))
+        if binder_index == "free":
+            n_range = (BINDER_INDEX_NODES[0], BINDER_INDEX_NODES[-1])
+            if not n_range[0] <= problem.n <= n_range[1]:
+                raise ValueError(f"binder_index='free' needs the set's binder index n = {problem.n:g} inside the "
+                                 f"binder-index tables' range [{n_range[0]:g}, {n_range[1]:g}]")
+            shared.append(BinderIndexSpec(n_range, problem.n, index_prior))
     else:
         nominal = roughness
     return infer_problem(problem, seed=seed, g=g, eps=eps_value, executor=executor,

@@ -17,6 +17,19 @@ to a matt surface, and nothing favours one decade over another. It is stored as 
 variable ``roughness`` over ``(chain, draw, surface)``; its prior bounds are recorded with the
 others (``prior_bounds``, scale ``log``), so the prior-edge flags cover it.
 
+Binder index
+------------
+The binder index ``n`` sets the surface's Fresnel reflection (the lobe's height) and what the
+facets do to the light entering and leaving the layer; on real gonio paints it is not known to
+better than a few hundredths, and the lobe's height is what tells it (the Cornell paints:
+``reports/cornell.md``). :class:`BinderIndexSpec` makes it a shared parameter of the same joint
+run: one coordinate ``n`` per set, prior ``N(1.45, 0.05^2)`` (issue 16; user-settable) truncated
+to the binder-index tables' range (:data:`bayespig.rough_table.BINDER_INDEX_NODES`, 1.37 .. 1.77),
+entering the forward model as the per-row input ``binder_index``
+(:class:`bayespig.rough_table.BinderIndexRoughTables`). It is stored as ``binder_index`` over
+``(chain, draw, surface)``, its bounds in ``prior_bounds`` (the truncation is the prior edge the
+flags watch).
+
 Noise floor in the joint run
 ----------------------------
 Real gonio data (exact zeros, dark directions) need the additive noise floor of
@@ -37,7 +50,8 @@ from .shared import FilmLayout, SharedParameter, sample_blocks
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 
-__all__ = ["ROUGHNESS_START_SD", "NoiseFloorFilmLayout", "RoughnessSpec", "roughness_argument",
+__all__ = ["BINDER_INDEX_PRIOR", "ROUGHNESS_START_SD", "BinderIndexSpec", "NoiseFloorFilmLayout",
+           "RoughnessSpec", "binder_index_argument", "binder_index_prior_argument", "roughness_argument",
            "sample_roughness"]
 
 #: Values (draws x bands x geometries) computed at once for the records of :func:`sample_roughness`.
@@ -47,6 +61,10 @@ RECORD_VALUES = 2**23
 PILOT_DRAWS_PER_CHAIN = 128
 #: Spread of the walkers' start around the nominal ``log alpha`` [-].
 ROUGHNESS_START_SD = 0.02
+#: Default prior of the binder index: normal (mean, sd) [-], truncated to the tables' range (issue 16).
+BINDER_INDEX_PRIOR = (1.45, 0.05)
+#: Spread of the walkers' start around the nominal binder index [-].
+BINDER_INDEX_START_SD = 0.005
 
 
 def roughness_argument(roughness, name="roughness"):
@@ -75,6 +93,108 @@ def roughness_argument(roughness, name="roughness"):
     if not (np.isfinite(value) and value >= 0):
         raise ValueError(f"{name} must be {expected}, got {roughness!r}")
     return value
+
+
+def binder_index_argument(binder_index, name="binder_index"):
+    """``binder_index`` checked: None (the set's own ``n``, fixed) or ``"free"`` (inferred).
+
+    Raises
+    ------
+    TypeError, ValueError
+        Naming ``name``, for anything else (a fixed index other than the set's is the set's ``n``:
+        ``read_measurements(..., n=...)``).
+    """
+    if binder_index is None:
+        return None
+    if isinstance(binder_index, str) and binder_index.strip() == "free":
+        return "free"
+    raise ValueError(f"{name} must be None (the measurement set's binder index, fixed) or 'free' (inferred "
+                     f"jointly with the roughness; prior N({BINDER_INDEX_PRIOR[0]}, {BINDER_INDEX_PRIOR[1]}^2)), "
+                     f"got {binder_index!r}")
+
+
+def binder_index_prior_argument(prior, name="binder_index_prior"):
+    """``prior`` checked: None (:data:`BINDER_INDEX_PRIOR`) or ``(mean, sd)`` with ``sd > 0`` [-].
+
+    Returns
+    -------
+    (float, float)
+
+    Raises
+    ------
+    TypeError, ValueError
+        Naming ``name``.
+    """
+    if prior is None:
+        return BINDER_INDEX_PRIOR
+    try:
+        mean, sd = (float(v) for v in prior)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be (mean, sd) of the binder index's normal prior, got {prior!r}") from None
+    if not (np.isfinite(mean) and mean > 1.0 and np.isfinite(sd) and sd > 0):
+        raise ValueError(f"{name} must be (mean, sd) with mean > 1 and sd > 0, got {prior!r}")
+    return mean, sd
+
+
+class BinderIndexSpec(SharedParameter):
+    """One binder index ``n`` for every film of a set: a spec of :mod:`bayespig.inference.shared`.
+
+    Parameters
+    ----------
+    n_range : (float, float)
+        Truncation of the prior [-] (the binder-index tables' range).
+    nominal : float
+        Index of the pilot run [-] (the set's ``n``), inside ``n_range``.
+    prior : (float, float)
+        Mean and sd of the normal prior [-] (default :data:`BINDER_INDEX_PRIOR`).
+    label : str
+        Name of the surface (the coordinate of the dimension ``surface``).
+    """
+
+    title = "binder index"
+    variable = "binder_index"
+    dimension = "surface"
+    long_name = "refractive index of the binder at the films' top surface"
+    units = "1"
+    coordinate_name = "binder_index"
+    attribute = "binder_index_prior"
+    prior_scale = "linear"
+
+    def __init__(self, n_range, nominal, prior=BINDER_INDEX_PRIOR, label="surface"):
+        low, high = (float(v) for v in n_range)
+        if not (1.0 < low < high and np.isfinite(high)):
+            raise ValueError(f"n_range must be (low, high) with 1 < low < high, got {n_range!r}")
+        if not low <= float(nominal) <= high:
+            raise ValueError(f"nominal binder index {nominal!r} must lie in n_range {n_range!r}")
+        mean, sd = binder_index_prior_argument(prior, "prior")
+        self.n_range, self.prior = (low, high), (mean, sd)
+        self.labels = (str(label),)
+        self.lower, self.upper = np.array([low]), np.array([high])
+        self.nominal = np.array([float(nominal)])
+        self.start_sd = np.array([BINDER_INDEX_START_SD])
+
+    def log_prior(self, x):
+        """Normal in ``n`` (unnormalised; the truncation is the box), (W,)."""
+        z = (np.asarray(x)[:, 0] - self.prior[0]) / self.prior[1]
+        return -0.5 * z * z
+
+    def physical(self, x):
+        """``n`` itself."""
+        return np.asarray(x, dtype=float)
+
+    def model_inputs(self, x):
+        """``binder_index``: every row's ``n``, (W,)."""
+        return {"binder_index": np.asarray(x, dtype=float)[:, 0]}
+
+    def describe_prior(self):
+        """The prior as text (provenance)."""
+        return (f"normal, mean {self.prior[0]:g}, sd {self.prior[1]:g}, truncated to [{self.n_range[0]:g}, "
+                f"{self.n_range[1]:g}] (the binder-index tables' range), one n for every film of the set")
+
+    def describe(self):
+        """Range, prior, label (the ``binder_index_prior`` attribute)."""
+        return {"n_range": list(self.n_range), "mean": self.prior[0], "sd": self.prior[1],
+                "surfaces": list(self.labels), "nominal": float(self.nominal[0]), "prior": self.describe_prior()}
 
 
 class RoughnessSpec(SharedParameter):
