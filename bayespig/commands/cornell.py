@@ -37,6 +37,9 @@ def add_cornell_parser(subparsers):
                         help="cap of every run's steps per walker (default 2000)")
     parser.add_argument("--draws-per-chain", type=int, default=None,
                         help="stored draws per chain (default 256)")
+    parser.add_argument("--fixed-binder-index", action="store_true",
+                        help="keep the binder index at 1.45 (default: inferred with the roughness; its rough "
+                             "tables at six index nodes are built once, minutes each)")
     parser.add_argument("--seed", type=int, default=0, help="seed of every fit (default 0)")
     add_verbosity_arguments(parser)
     parser.set_defaults(func=run_cornell)
@@ -68,7 +71,7 @@ def run_cornell(args):
         value = getattr(args, name)
         if value is not None and value < 1:
             raise ValueError(f"--{name.replace('_', '-')} must be a positive integer, got {value}")
-    settings = CornellStudySettings(seed=args.seed)
+    settings = CornellStudySettings(seed=args.seed, binder_index=None if args.fixed_binder_index else "free")
     overrides = {k: v for k, v in (("max_steps", args.max_steps), ("draws_per_chain", args.draws_per_chain))
                  if v is not None}
     if overrides:

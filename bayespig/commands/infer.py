@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 import warnings
@@ -62,6 +63,10 @@ def add_infer_parser(subparsers):
     parser.add_argument("--roughness", default=None, metavar="free|NUMBER",
                         help="GGX roughness alpha of the films' top surface: 'free' (inferred, shared by all "
                              "wavelengths) or a number (fixed; 0 = smooth, the default)")
+    parser.add_argument("--binder-index", default=None, metavar="free",
+                        help="binder index n of the films' surface: 'free' (inferred with the roughness, "
+                             "needs --roughness free; prior normal 1.45 +- 0.05 truncated to 1.37-1.77); "
+                             "default: the file's n (1.45), fixed")
     parser.add_argument("--exclude-mirror", type=float, default=None, metavar="DEG",
                         help="drop the films' geometries within DEG degrees of the mirror direction")
     parser.add_argument("--max-angle", type=float, default=None, metavar="DEG",
@@ -119,6 +124,16 @@ def _roughness_argument(text):
         raise ValueError(str(error)) from None
 
 
+def _binder_index_argument(text):
+    """``--binder-index`` text -> ``"free"`` or None (not given)."""
+    from ..inference.roughness import binder_index_argument
+
+    try:
+        return binder_index_argument(text, name="--binder-index")
+    except (TypeError, ValueError) as error:
+        raise ValueError(str(error)) from None
+
+
 def _wavelengths_argument(text):
     """``(wavelengths, wavelength_range)`` from ``--wavelengths``: ``LOW-HIGH`` or ``W1,W2,...`` [nm]."""
     if text is None:
@@ -149,6 +164,10 @@ def run_infer(args):
     eps = eps_argument(args.eps)
     noise_floor = _noise_floor_argument(args.noise_floor)
     roughness = _roughness_argument(args.roughness)
+    binder_index = _binder_index_argument(args.binder_index)
+    if binder_index == "free" and roughness != "free":
+        raise ValueError("--binder-index free needs --roughness free (the binder index is inferred with the "
+                         "surface's roughness)")
     wavelengths, wavelength_range = _wavelengths_argument(args.wavelengths)
     overrides = {name: value for name, value in (("n_walkers", args.walkers),
                                                  ("n_ensembles", args.ensembles),
@@ -166,7 +185,7 @@ def run_infer(args):
         idata = infer(measurements, method=args.method, seed=args.seed,
                       g=args.g, eps=eps, progress=not args.no_progress, settings=settings,
                       substrate_sd=args.substrate_sd, noise_floor=noise_floor, roughness=roughness,
-                      exclude_mirror_deg=args.exclude_mirror, max_angle_deg=args.max_angle,
+                      binder_index=binder_index, exclude_mirror_deg=args.exclude_mirror, max_angle_deg=args.max_angle,
                       wavelengths=wavelengths, wavelength_range=wavelength_range)
         flagged = diagnose(idata, warn=False)
     for warning in caught:
@@ -194,6 +213,11 @@ def run_infer(args):
               "rough tables' range)")
     elif idata.posterior.attrs.get("roughness_mode") == "fixed":
         print(f"surface roughness alpha {idata.posterior.attrs['roughness']:g} (fixed)")
+    if "binder_index" in idata.posterior:
+        n = np.asarray(idata.posterior["binder_index"].values, dtype=float).ravel()
+        low, median, high = np.quantile(n, [0.05, 0.5, 0.95])
+        print(f"binder index n {median:.4g} [{low:.4g}, {high:.4g}] (90 %; "
+              f"prior {json.loads(idata.posterior.attrs['binder_index_prior'])['prior']})")
     print(f"wrote {posterior_path} and {summary_path}")
     sys.stdout.flush()
     untestable = np.flatnonzero(~check["testable"] & ~check["flagged"])

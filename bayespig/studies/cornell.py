@@ -100,6 +100,10 @@ class CornellStudySettings:
         Keep at most this many geometries per paint (evenly spread; for tests).
     inference : InferenceSettings
         Sampler settings of every fit.
+    binder_index : {"free", None}
+        The binder index of the rough fits: inferred with the roughness (the default; its
+        tables at the six index nodes are built once per geometry set, the subsets' taken from
+        the full set's, :func:`bayespig.rough_table.derive_rough_table`) or None (fixed at 1.45).
     seed : int
     """
 
@@ -110,6 +114,7 @@ class CornellStudySettings:
     max_geometries: int | None = None
     inference: InferenceSettings = dataclasses.field(
         default_factory=lambda: InferenceSettings(draws_per_chain=256, target_ess=400, max_steps=2000))
+    binder_index: str | None = "free"
     seed: int = 0
 
 
@@ -207,6 +212,9 @@ def fit_summary(idata, *, interval=INTERVAL):
     out["roughness"] = (tuple(np.quantile(np.asarray(post["roughness"].values, dtype=float).ravel(),
                                           [tail, 0.5, 1.0 - tail]))
                         if "roughness" in post else None)
+    out["binder_index"] = (tuple(np.quantile(np.asarray(post["binder_index"].values, dtype=float).ravel(),
+                                             [tail, 0.5, 1.0 - tail]))
+                           if "binder_index" in post else None)
     out["noise_floor"] = (np.median(q.posterior_draws(idata, "noise_floor"), axis=0)
                           if "noise_floor" in post else None)
     residuals = q.residuals_in_eps(idata)
@@ -234,6 +242,26 @@ def _infer(measurements, settings, **kwargs):
     summary["seconds"] = time.perf_counter() - started
     summary["warnings"] = sorted({str(w.message) for w in caught})
     return summary
+
+
+def _rough_instrument(measurements):
+    """The instrument the forward model tabulates for the (one) film of a set."""
+    from ..likelihood import Problem
+
+    return Problem.from_measurements(measurements, "auto").films[0].instrument
+
+
+def _derive_subset_tables(full, subsets, over_n):
+    """Cache the subsets' rough tables as columns of the full set's (at the set's ``n``, and at
+    every binder-index node when ``over_n``): no build for a subset of geometries."""
+    from ..rough_table import BINDER_INDEX_NODES, derive_rough_table, load_rough_table
+
+    parent = _rough_instrument(full)
+    indices = sorted({float(full.n)} | (set(BINDER_INDEX_NODES) if over_n else set()))
+    for n in indices:
+        table = load_rough_table(parent, n=n, progress=False)
+        for subset in subsets:
+            derive_rough_table(table, _rough_instrument(subset))
 
 
 def cornell_study(folder=None, settings=None, paints=None, progress=None):
@@ -272,13 +300,15 @@ def cornell_study(folder=None, settings=None, paints=None, progress=None):
         result = {"counts": {"all": _n_geometries(measurements), "full": _n_geometries(full),
                              "far": _n_geometries(far), "near": _n_geometries(near)}}
         bands = None if settings.full_bands is None else list(settings.full_bands)
-        say(f"{paint}: full fit, {result['counts']['full']} geometries, roughness free")
-        result["full"] = _infer(full, settings, roughness="free", wavelengths=bands)
+        surface = {"roughness": "free", "binder_index": settings.binder_index}
+        say(f"{paint}: full fit, {result['counts']['full']} geometries, roughness"
+            + (" and binder index" if settings.binder_index else "") + " free")
+        result["full"] = _infer(full, settings, wavelengths=bands, **surface)
+        _derive_subset_tables(full, (far, near), settings.binder_index == "free")
         subset_bands = None if settings.subset_bands is None else list(settings.subset_bands)
         for name in ("far", "near"):
             say(f"{paint}: subset '{name}', {result['counts'][name]} geometries")
-            result[name] = _infer(far if name == "far" else near, settings, roughness="free",
-                                  wavelengths=subset_bands)
+            result[name] = _infer(far if name == "far" else near, settings, wavelengths=subset_bands, **surface)
         say(f"{paint}: smooth model at {', '.join(f'{b:g}' for b in settings.smooth_bands)} nm")
         result["smooth"] = _infer(full, settings, roughness=0.0, wavelengths=list(settings.smooth_bands))
         result["overlap"] = interval_overlap(result["far"]["a"][[0, 2]], result["near"]["a"][[0, 2]])
@@ -371,7 +401,10 @@ def cornell_report(study):
              "see its README). Each paint is read as an opaque film (`read_measurements(path, opaque=True)`)."),
              "",
              ("Model: opaque isotropic layer under a rough GGX air/binder surface (`bayespig.physics.rough_surface`), "
-             "roughness alpha one parameter shared by all bands (log-uniform on 0.01..1), a per-band noise floor "
+             "roughness alpha one parameter shared by all bands (log-uniform on 0.01..1), "
+             + ("the binder index n another (normal 1.45 +- 0.05 truncated to 1.37..1.77; it sets the lobe's "
+                "height), " if settings.binder_index == "free" else "binder index fixed at 1.45, ")
+             + "a per-band noise floor "
              f"inferred (log-uniform), eps fixed at {EPS:g}: the joint roughness sampler needs a known eps, the "
              "floor takes the absolute noise of dark values and of the exact zeros, and a fixed eps keeps misfit "
              "visible in the model check rather than absorbed by a growing eps."), "",
@@ -396,8 +429,10 @@ def cornell_report(study):
                   f"{MIRROR_CUT_DEG:g}° from the mirror ({full['seconds']:.0f} s, steps per run "
                   f"{', '.join(map(str, full['n_steps']))}"
                   + (", **max_steps reached**" if full["max_steps_reached"] else "") + ").", ""]
-        r = full["roughness"]
-        lines += [f"**Roughness alpha (GGX): {_interval(*r, digits=4)}** (median [90 % interval]).", ""]
+        r, n = full["roughness"], full["binder_index"]
+        lines += [f"**Roughness alpha (GGX): {_interval(*r, digits=4)}**"
+                  + ("" if n is None else f"; **binder index n: {_interval(*n, digits=4)}**")
+                  + " (median [90 % interval]).", ""]
         for line in full["warnings"]:
             lines += [f"- warning: {line}"]
         lines += [f"- not converged: {line}" for line in _grouped_diagnostics(full["diagnostics"])]
@@ -408,7 +443,9 @@ def cornell_report(study):
         share = float(np.mean(overlap)) if overlap.size else float("nan")
         overlap_ok = bool(share >= OVERLAP_GOAL)
         goals.append((name, body_wl, body_res, residual_ok, share, overlap_ok, overlap.size,
-                      " / ".join(_interval(*result[k]["roughness"], digits=3) for k in ("full", "far", "near"))))
+                      " / ".join(_interval(*result[k]["roughness"], digits=3) for k in ("full", "far", "near")),
+                      " / ".join(_interval(*result[k]["binder_index"], digits=3) if result[k]["binder_index"]
+                                 else "1.45 (fixed)" for k in ("full", "far", "near"))))
         lines += ["### Goals", "",
                   (f"- Median |residual| <= {_pct(RESIDUAL_GOAL)} at {BODY_BANDS_NM[paint][0]:g}-"
                   f"{BODY_BANDS_NM[paint][1]:g} nm: **{'met' if residual_ok else 'NOT met'}** "
@@ -467,7 +504,11 @@ def cornell_report(study):
                   f"Same model on the geometries > {SUBSET_SPLIT_DEG:g}° from the mirror ({counts['far']}) and on "
                   f"those {MIRROR_CUT_DEG:g}-{SUBSET_SPLIT_DEG:g}° from it ({counts['near']}), both with theta_i, "
                   f"theta_o <= {SUBSET_MAX_ANGLE_DEG:g}°. Roughness: far {_interval(*far['roughness'], digits=4)}, "
-                  f"near {_interval(*near['roughness'], digits=4)}; runs {far['seconds']:.0f} s and "
+                  f"near {_interval(*near['roughness'], digits=4)}"
+                  + ("" if far["binder_index"] is None else
+                     f"; binder index: far {_interval(*far['binder_index'], digits=4)}, "
+                     f"near {_interval(*near['binder_index'], digits=4)}")
+                  + f"; runs {far['seconds']:.0f} s and "
                   f"{near['seconds']:.0f} s"
                   + ("; **max_steps reached**" if far["max_steps_reached"] or near["max_steps_reached"] else "")
                   + ".", ""]
@@ -500,15 +541,16 @@ def cornell_report(study):
         lines += [""]
     summary = ["## Summary of the goals", "",
                _table(["paint", "body bands", "median residual there", "residual goal", "subset overlap",
-                       "overlap goal", "roughness: full / far / near subset"],
+                       "overlap goal", "roughness: full / far / near subset",
+                       "binder index: full / far / near subset"],
                       [[n, f"{bw[0]:g}-{bw[-1]:g} nm" if bw.size else "none fitted",
                         ", ".join(_pct(v) for v in br) or "n/a", "met" if rok else "NOT met",
-                        f"{_pct(sh)} of {nb} bands", "met" if ook else "NOT met", alphas]
-                       for n, bw, br, rok, sh, ook, nb, alphas in goals]), "",
-               ("The roughness of the two subsets, each a single GGX alpha for all bands, tells whether one "
-                "microfacet surface describes the paint near and far from the mirror alike: where their "
-                "intervals are apart, the surface model (not the pigment) is what the data reject, and the "
-                "subsets' a(λ) need not agree either."), ""]
+                        f"{_pct(sh)} of {nb} bands", "met" if ook else "NOT met", alphas, indices]
+                       for n, bw, br, rok, sh, ook, nb, alphas, indices in goals]), "",
+               ("The surface of the two subsets, each one GGX alpha (and binder index) for all bands, tells "
+                "whether one microfacet surface describes the paint near and far from the mirror alike: where "
+                "their intervals are apart, the surface model (not the pigment) is what the data reject, and "
+                "the subsets' a(λ) need not agree either."), ""]
     head = lines[:lines.index(f"## {PAINTS.get(next(iter(study['paints'])), next(iter(study['paints'])))} "
                               f"(`{next(iter(study['paints']))}.astm`)")] if study["paints"] else lines
     text = "\n".join(head + summary + lines[len(head):]) + "\n"

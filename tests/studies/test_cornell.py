@@ -29,7 +29,7 @@ needs_cornell = pytest.mark.skipif(not (CORNELL / "garnet_red.astm").exists(),
 #: bands, short chains: it checks the study's plumbing and report, not its numbers.
 TINY = CornellStudySettings(
     full_bands=(450.0, 650.0), subset_bands=(450.0, 650.0), smooth_bands=(650.0,), incidences_deg=(30.0,),
-    max_geometries=60,
+    max_geometries=60, binder_index=None,
     inference=InferenceSettings(n_walkers=16, n_ensembles=2, draws_per_chain=32, target_ess=10, min_steps=50,
                                 max_steps=80, check_interval=40))
 
