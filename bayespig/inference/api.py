@@ -44,7 +44,6 @@ from .roughness import (
     binder_index_argument,
     binder_index_prior_argument,
     roughness_argument,
-    sample_roughness,
 )
 from .settings import ConvergenceWarning
 from .shared import pilot_draws, sample_joint
@@ -218,11 +217,9 @@ def _sample_shared(problem, model, priors, eps, settings, seed, specs, executor,
         pilot = infer_problem(problem, seed=int(pilot_seed.generate_state(1)[0]), g="isotropic", eps=eps,
                               executor=executor, progress=progress, priors=priors, settings=pilot_settings,
                               tables=model.tables, noise_floor=noise_floor, roughness=model.roughness)
-    if not floored and problem.groups:  # the card factors' path, as before
-        return sample_joint(model, specs, pilot_draws(pilot), priors, eps, settings, joint_seed, start_seed)
     layout = NoiseFloorFilmLayout(model, priors, eps) if floored else model
-    return sample_roughness(layout, specs, _pilot_blocks(pilot, problem, floored), settings, joint_seed,
-                            start_seed, priors, eps)
+    return sample_joint(layout, specs, _pilot_blocks(pilot, problem, floored), priors, eps, settings, joint_seed,
+                        start_seed)
 
 
 def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, progress=True,

@@ -37,25 +37,21 @@ Real gonio data (exact zeros, dark directions) need the additive noise floor of
 (:class:`bayespig.inference.shared.FilmLayout`) with one more coordinate per wavelength,
 ``log sigma0`` (log-uniform on ``priors.noise_floor_range``, as in the per-wavelength runs), and
 the likelihood ``N(x_obs | x, (eps x)^2 + sigma0^2)`` (the layout's ``log_density``).
-:func:`sample_roughness` runs it (or the plain film layout) and returns the per-wavelength
-records of :func:`bayespig.inference.shared.sample_joint`, with the floor's draws.
+:func:`bayespig.inference.shared.sample_joint` runs it as it runs the plain film layout, and its
+records then carry the floor's draws.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .outputs import STORED_DRAW_DTYPE
-from .shared import FilmLayout, SharedParameter, sample_blocks
+from .shared import FilmLayout, SharedParameter
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 
 __all__ = ["BINDER_INDEX_PRIOR", "ROUGHNESS_START_SD", "BinderIndexSpec", "NoiseFloorFilmLayout",
-           "RoughnessSpec", "binder_index_argument", "binder_index_prior_argument", "roughness_argument",
-           "sample_roughness"]
+           "RoughnessSpec", "binder_index_argument", "binder_index_prior_argument", "roughness_argument"]
 
-#: Values (draws x bands x geometries) computed at once for the records of :func:`sample_roughness`.
-RECORD_VALUES = 2**23
 #: Draws per chain kept by the pilot of a roughness or noise-floor joint run: it only gives the
 #: blocks' medians and start points, and its stored per-draw predictions would be most of the memory.
 PILOT_DRAWS_PER_CHAIN = 128
@@ -321,69 +317,3 @@ class NoiseFloorFilmLayout(FilmLayout):
         residual += _LOG_2PI
         residual *= -0.5
         return residual
-
-
-def sample_roughness(layout, specs, draws, settings, joint_seed, start_seed, priors, eps):
-    """Joint run of a film layout (with or without a noise floor) and its shared specs.
-
-    :func:`bayespig.inference.shared.sample_blocks`, then the per-wavelength records of
-    :func:`bayespig.inference.shared.sample_joint` (with ``noise_floor`` where the layout has one).
-
-    Returns
-    -------
-    tuple
-        ``(records, shared, settings, joint)`` as :func:`~bayespig.inference.shared.sample_joint`.
-    """
-    run, used, joint = sample_blocks(layout, specs, draws, settings, joint_seed, start_seed, priors, eps)
-    n_wl, G = joint.n_wavelengths, joint.n_groups
-    floored = isinstance(joint.layout, NoiseFloorFilmLayout)
-    theta = run.pop("theta")
-    n_chains, n_draws, n_dim = theta.shape
-    flat = theta.reshape(-1, n_dim)
-    a, tau, *physical = joint.unpack(flat)
-    blocks = joint.blocks_of(joint.theta_of(flat)[0])
-    # per-draw predictions and pointwise log-likelihoods, in blocks of draws and stored in single
-    # precision at once (as the outputs store them): on 1439 geometries x 31 bands x 4096 draws each
-    # is 183 M values, 1.5 GB in double precision
-    N = flat.shape[0]
-    model_values = np.empty((N, n_wl, joint.observed.shape[1]), dtype=STORED_DRAW_DTYPE)
-    pointwise = np.empty_like(model_values)
-    step = max(1, RECORD_VALUES // max(1, n_wl * joint.observed.shape[1]))
-    for start in range(0, N, step):
-        rows = flat[start:start + step]
-        model_values[start:start + step] = joint.predict(rows)
-        pointwise[start:start + step] = joint.log_likelihood(rows)
-    floor = joint.layout.noise_floor_of(blocks) if floored else None
-    noisy = None
-    if used.predictive_noise:
-        rng = np.random.default_rng(run["predictive_seed"])
-        noisy = model_values * (1.0 + joint.eps * rng.standard_normal(model_values.shape))
-        if floored:
-            noisy = noisy + floor[..., None] * rng.standard_normal(model_values.shape)
-    shape = (n_chains, n_draws)
-    autocorr = run["autocorr_time"]
-    records = []
-    for i in range(n_wl):
-        times = [[autocorr[i]], autocorr[n_wl + i * G:n_wl + (i + 1) * G]]
-        if floored:
-            times.append([autocorr[n_wl * (1 + G) + i]])
-        record = {
-            "a": a[:, i].reshape(shape),
-            "tau": tau[:, i].reshape(shape + (G,)),
-            "y": model_values[:, i].reshape(shape + (-1,)),
-            "log_likelihood": pointwise[:, i].reshape(shape + (-1,)),
-            "lp": pointwise[:, i].sum(axis=-1).reshape(shape),
-            "acceptance_rate": run["acceptance_rate"],
-            "autocorr_time": np.concatenate(times),
-            "n_steps": run["n_steps"], "n_burn_in": run["n_burn_in"], "thin": run["thin"],
-            "max_steps_reached": run["max_steps_reached"],
-        }
-        if floored:
-            record["noise_floor"] = floor[:, i].reshape(shape)
-        if noisy is not None:
-            record["y_rep"] = noisy[:, i].reshape(shape + (-1,))
-        records.append(record)
-    shared_autocorr = autocorr[joint.shared_slice]
-    shared = [(values.reshape(shape + (spec.size,)), shared_autocorr[part])
-              for spec, values, part in zip(joint.specs, physical, joint.spec_slices)]
-    return records, shared, used, joint

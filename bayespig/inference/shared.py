@@ -114,6 +114,7 @@ import numpy as np
 
 from ..likelihood import Priors, multiplicative_normal_logpdf
 from .moves import IndependentEnsemblesMove, ensemble_halves
+from .outputs import STORED_DRAW_DTYPE
 from .sampler import _sample_stack
 
 __all__ = [
@@ -130,6 +131,8 @@ __all__ = [
     "sample_joint",
 ]
 
+#: Values (draws x bands x measured values) predicted at once for the records of :func:`sample_joint`.
+RECORD_VALUES = 2**23
 #: Levenberg-Marquardt damping (relative to the mean eigenvalue of J^T J) of the blocks'
 #: sensitivity to the shared parameters: in a ravine the undamped Gauss-Newton step along the
 #: ravine is huge and only valid for tiny changes. Any sensitivity gives a valid sampler (it is a
@@ -777,14 +780,17 @@ def sample_blocks(model, specs, draws, settings, joint_seed, start_seed, priors=
 
 
 def sample_joint(model, specs, draws, priors, eps, settings, joint_seed, start_seed):
-    """Joint run of one film problem (:class:`FilmLayout`) with the shared parameters ``specs``, from a pilot.
+    """Joint run of one film problem with the shared parameters ``specs``, from a pilot.
 
     :func:`sample_blocks` with the film's records.
 
     Parameters
     ----------
-    model : ForwardModel
-        Isotropic.
+    model : ForwardModel or FilmLayout
+        Isotropic; a ForwardModel is its :class:`FilmLayout`. A film layout with more block
+        coordinates than ``[a, log tau]`` (the inferred noise floor of
+        :class:`bayespig.inference.roughness.NoiseFloorFilmLayout`, which has ``noise_floor_of``)
+        gives records with ``noise_floor``, and its floor enters the predictive draws.
     specs : sequence of SharedParameter
     draws : numpy.ndarray
         The pilot's draws (:func:`pilot_draws`): their medians are ``theta_hat``, and the walkers
@@ -807,18 +813,32 @@ def sample_joint(model, specs, draws, priors, eps, settings, joint_seed, start_s
     """
     run, used, joint = sample_blocks(model, specs, draws, settings, joint_seed, start_seed, priors, eps)
     n_wl, G = joint.n_wavelengths, joint.n_groups
+    noise_floor_of = getattr(joint.layout, "noise_floor_of", None)
     theta = run.pop("theta")
     n_chains, n_draws, n_dim = theta.shape
     flat = theta.reshape(-1, n_dim)
     a, tau, *physical = joint.unpack(flat)
-    model_values = joint.predict(flat)  # (N, n_wl, n_values)
-    pointwise = joint.log_likelihood(flat)
+    # per-draw predictions and pointwise log-likelihoods, in blocks of draws and stored in single
+    # precision at once (as the outputs store them): on 1439 geometries x 31 bands x 4096 draws each
+    # is 183 M values, 1.5 GB in double precision
+    N, n_values = flat.shape[0], joint.observed.shape[1]
+    model_values = np.empty((N, n_wl, n_values), dtype=STORED_DRAW_DTYPE)
+    pointwise = np.empty_like(model_values)
+    step = max(1, RECORD_VALUES // max(1, n_wl * n_values))
+    for first in range(0, N, step):
+        rows = flat[first:first + step]
+        model_values[first:first + step] = joint.predict(rows)
+        pointwise[first:first + step] = joint.log_likelihood(rows)
+    floor = None if noise_floor_of is None else noise_floor_of(joint.blocks_of(joint.theta_of(flat)[0]))
     noisy = None
     if used.predictive_noise:
         rng = np.random.default_rng(run["predictive_seed"])
         noisy = model_values * (1.0 + joint.eps * rng.standard_normal(model_values.shape))
+        if floor is not None:
+            noisy = noisy + floor[..., None] * rng.standard_normal(model_values.shape)
     shape = (n_chains, n_draws)
     autocorr = run["autocorr_time"]
+    block_index = joint.layout.flat_index  # (n_wl, k): each wavelength's coordinates in the flat vector
     records = []
     for i in range(n_wl):
         record = {
@@ -826,12 +846,14 @@ def sample_joint(model, specs, draws, priors, eps, settings, joint_seed, start_s
             "tau": tau[:, i].reshape(shape + (G,)),
             "y": model_values[:, i].reshape(shape + (-1,)),
             "log_likelihood": pointwise[:, i].reshape(shape + (-1,)),
-            "lp": pointwise[:, i].sum(axis=-1).reshape(shape),
+            "lp": pointwise[:, i].sum(axis=-1, dtype=float).reshape(shape),
             "acceptance_rate": run["acceptance_rate"],
-            "autocorr_time": np.concatenate([[autocorr[i]], autocorr[n_wl + i * G:n_wl + (i + 1) * G]]),
+            "autocorr_time": autocorr[block_index[i]],
             "n_steps": run["n_steps"], "n_burn_in": run["n_burn_in"], "thin": run["thin"],
             "max_steps_reached": run["max_steps_reached"],
         }
+        if floor is not None:
+            record["noise_floor"] = floor[:, i].reshape(shape)
         if noisy is not None:
             record["y_rep"] = noisy[:, i].reshape(shape + (-1,))
         records.append(record)
