@@ -43,7 +43,7 @@ from .adding_doubling import (
 from .discrete_ordinates import SMALL_ABSORPTION, THIN_LAYER, radiances_under_surface
 from .fresnel import fresnel_reflectance, normal_transmittance, refracted_cosine
 from .microfacet import DISTRIBUTIONS, directional_albedo, reflection_brdf
-from .phase import is_rayleigh, n_fourier_modes, normalise_on_quadrature, phase_fourier_modes
+from .phase import ModeStopping, is_rayleigh, n_fourier_modes, normalise_on_quadrature, phase_fourier_modes
 from .quadrature import DEFAULT_QUADRATURE_POINTS, binder_quadrature, default_quadrature_points
 from .rough_surface import ROUGHNESS_MAX, rough_surface_terms
 
@@ -677,25 +677,18 @@ def _solve_chunk(levels, a, tau, adaptive, start_thickness, included_substrate, 
             terms.update(mode)
             scale = np.abs(f_mode if black is None else black)
             f_modes.append(f_mode)
-            quiet = np.zeros(f_mode.shape, dtype=int)
-            n_used = np.full(f_mode.shape, n_max)
+            stopping = ModeStopping(scale, n_max, MODE_TOLERANCE, adaptive)
             continue
-        active = (n_used > m).any(axis=(1, 2))
+        active = stopping.active(m)
         full = np.zeros_like(f_modes[0])
         for level, rows in ((levels[0], active & ~coarse), (levels[-1], active & coarse)):
             if rows.any():
                 full[rows] = _solve_mode(level, m, a[rows], tau[rows], thickness, None, solver)[0]["f_mode"]
         f_modes.append(full)
         coarse |= (np.abs(full) <= COARSE_AFTER * scale).all(axis=(1, 2))
-        if adaptive:
-            small = np.abs(full) <= MODE_TOLERANCE * scale
-            quiet = np.where(small, quiet + 1, 0)
-            n_used = np.where((quiet == 2) & (n_used > m), m + 1, n_used)
-            if (n_used <= m + 1).all():
-                break
-    f_modes = np.stack(f_modes, axis=1)
-    f_modes[np.arange(f_modes.shape[1])[None, :, None, None] >= n_used[:, None]] = 0.0
-    terms["f0_modes"] = f_modes
+        if stopping.add(m, full):
+            break
+    terms["f0_modes"] = stopping.truncate(f_modes)
     return terms
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
+    "ModeStopping",
     "henyey_greenstein",
     "is_isotropic",
     "is_rayleigh",
@@ -167,3 +168,52 @@ def normalise_on_quadrature(p_reflection, p_transmission, weight, n_iterations=N
     s[~real] = 2.0 / column[~real]
     scale = s[:, None] * s[None, :]
     return p_reflection * scale, p_transmission * scale
+
+
+class ModeStopping:
+    """Where each value's azimuthal Fourier series stops: the solvers' adaptive number of modes.
+
+    A value (parameter set x geometry) stops after two modes in a row below ``tolerance`` times
+    ``scale`` (its mode 0, or its mode 0 over black, which bounds every mode of a positive BRDF), so
+    its result never depends on which other values share the call. Used by the smooth solver
+    (:func:`bayespig.physics.forward.surface_terms`) and the rough one
+    (:func:`bayespig.physics.rough_surface.rough_surface_terms`).
+
+    Parameters
+    ----------
+    scale : numpy.ndarray
+        ``|mode 0|`` of every value, shape (B, k_out, k_in).
+    max_modes : int
+        The most modes any value gets.
+    tolerance : float
+        Relative size of a negligible mode [-].
+    adaptive : bool
+        False: every value gets ``max_modes`` (a fixed ``n_modes``).
+    """
+
+    def __init__(self, scale, max_modes, tolerance, adaptive=True):
+        self.scale = np.abs(scale)
+        self.tolerance, self.adaptive = float(tolerance), bool(adaptive)
+        self.quiet = np.zeros(self.scale.shape, dtype=int)
+        #: The modes every value uses (it stops at its ``n_used - 1``).
+        self.n_used = np.full(self.scale.shape, int(max_modes))
+
+    def active(self, m):
+        """Parameter sets (B,) with a value that still needs mode ``m``."""
+        return (self.n_used > m).any(axis=(1, 2))
+
+    def add(self, m, f_mode):
+        """Record mode ``m >= 1`` of every value; True when every value has stopped."""
+        if not self.adaptive:
+            return False
+        small = np.abs(f_mode) <= self.tolerance * self.scale
+        self.quiet = np.where(small, self.quiet + 1, 0)
+        self.n_used = np.where((self.quiet == 2) & (self.n_used > m), m + 1, self.n_used)
+        return bool((self.n_used <= m + 1).all())
+
+    def truncate(self, f_modes):
+        """The modes stacked (B, M, k_out, k_in), each value's beyond its stop set to 0."""
+        f_modes = np.stack(f_modes, axis=1)
+        f_modes[np.arange(f_modes.shape[1])[None, :, None, None] >= self.n_used[:, None]] = 0.0
+        return f_modes
+

@@ -75,7 +75,7 @@ from .microfacet import (
     reflection_modes,
     transmission_modes,
 )
-from .phase import n_fourier_modes, normalise_on_quadrature, phase_fourier_modes
+from .phase import ModeStopping, n_fourier_modes, normalise_on_quadrature, phase_fourier_modes
 from .quadrature import binder_quadrature
 
 __all__ = ["FINEST_PANEL", "MODE_BLOCK", "PANEL_POINTS", "ROUGHNESS_MAX", "RoughInterface", "rough_interface",
@@ -370,9 +370,7 @@ def rough_surface_terms(theta_in, theta_out, *, a, tau, g, n, n_points, alpha, n
     terms = {"t_down": np.zeros((B, k_in)), "t_up": np.zeros((B, k_out)), "r_up": np.zeros(B),
              "h0": np.zeros((B, k_in)), "t_up_hemispherical": np.zeros(B)}
     f_modes = []
-    n_used = np.full((B, k_out, k_in), max_modes)
-    quiet = np.zeros((B, k_out, k_in), dtype=int)
-    scale = None
+    stopping = None
     for m in range(max_modes):
         block, within = divmod(m, size)
         A_in = interface.entering(mu_in, block, size)[within]
@@ -380,7 +378,7 @@ def rough_surface_terms(theta_in, theta_out, *, a, tau, g, n, n_points, alpha, n
         W = interface.internal(block, size)[within]
         thickness = start_thickness if m == 0 else max(start_thickness, START_THICKNESS_HIGHER_MODES)
         f = np.zeros((B, k_out, k_in))
-        active = np.ones(B, dtype=bool) if m == 0 else (n_used > m).any(axis=(1, 2))
+        active = np.ones(B, dtype=bool) if m == 0 else stopping.active(m)
         for rows in groups:
             rows = rows[active[rows]]
             if rows.size == 0:
@@ -392,16 +390,10 @@ def rough_surface_terms(theta_in, theta_out, *, a, tau, g, n, n_points, alpha, n
                 terms[key][rows] = value
         f_modes.append(f)
         if m == 0:
-            scale = np.abs(f)
+            stopping = ModeStopping(f, max_modes, mode_tolerance, adaptive)
             continue
-        if adaptive:
-            small = np.abs(f) <= mode_tolerance * scale
-            quiet = np.where(small, quiet + 1, 0)
-            n_used = np.where((quiet == 2) & (n_used > m), m + 1, n_used)
-            if (n_used <= m + 1).all():
-                break
-    f_modes = np.stack(f_modes, axis=1)
-    f_modes[np.arange(f_modes.shape[1])[None, :, None, None] >= n_used[:, None]] = 0.0
+        if stopping.add(m, f):
+            break
     terms["r_up"][np.isinf(tau)] = 0.0
-    terms["f0_modes"] = f_modes
+    terms["f0_modes"] = stopping.truncate(f_modes)
     return terms
