@@ -380,8 +380,9 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         smooth model of before. Default (None): 0, for every set. ``"free"`` is not the default
         for BRDF sets yet (issue 16 asks for it): its prior (the rough tables' 0.01 .. 1) excludes
         the smooth surface, so a smooth film's ``a`` is biased (a simulated smooth opaque film's
-        colour moved by 1.8 CIELAB units), and on the real Cornell paints one GGX lobe leaves
-        median residuals of 24-44 % (``reports/cornell.md``). Rough surfaces need opaque films
+        colour moved by 1.8 CIELAB units), and on the real Cornell paints one GGX surface, even
+        with the binder index inferred, leaves median residuals of 13-21 % at the red paint's
+        body bands and geometry subsets that disagree (``reports/cornell.md``). Rough surfaces need opaque films
         and isotropic scattering.
     binder_index : {None, "free"}, optional
         None: the binder index is the set's ``n`` (``read_measurements(..., n=...)``, 1.45 by
