@@ -19,7 +19,8 @@ coordinates, block-wise moves, a pilot start); :func:`bayespig.infer` samples it
 ``substrate_sd=`` (the same ensembles, run-length rule and diagnostics as the per-wavelength
 runs, on the joint vector; one vectorised table call evaluates every wavelength of every
 walker) and stores the factors as the posterior variable ``r_s_factor`` over
-``(chain, draw, card)``.
+``(chain, draw, card)``. A pigment library's build samples the same spec over the cards of all
+films of a stage (:meth:`CardFactors.over_cards`, :func:`bayespig.library.build.card_factor_spec`).
 
 Identifiability: a factor is learned from the data only when the films over that card have
 more values per wavelength than parameters (multi-angle instruments, several film groups of one

@@ -10,6 +10,18 @@ the constants being fitted (:class:`LibraryLayout`, ``k = 2 * n_pigments``), and
 thicknesses as the shared spec (:class:`bayespig.inference.film_thickness.FilmThickness`, prior
 ``log h ~ N(0, 0.5^2)`` unless measured): residual coordinates, block moves, one run per stage.
 
+The cards' uncertainty (``substrate_sd=``, as :func:`bayespig.infer`'s): every card each film
+is measured over gets a factor on its albedo, ``r_s = f r_s,card`` at every wavelength, ``log f
+~ N(0, substrate_sd^2)``, one per card and film (:func:`card_factor_spec`; the spec
+:class:`~bayespig.inference.card_factors.CardFactors` of ``infer``, over the cards of all the
+stage's films), sampled in the same joint run with the thicknesses and entering every film's
+prediction through :meth:`~bayespig.library.film_models.FilmPredictor.values`' ``r_s_scale``
+(both film models). Default None as in ``infer``: the cards as converted from their
+measurements. Simulated (``tests/library/test_build.py``): a white card 10 % brighter than
+measured left its film at 1.5 % rms against 1 % noise and 9 of 12 constants inside their 90 %
+intervals without factors; with ``substrate_sd=0.1`` the factor's 90 % interval was [1.04,
+1.16] around the true 1.1, the film at 0.1 %, 12 of 12 inside (the stage 20 s against 14 s).
+
 Stages: a cut (modular) posterior
 ---------------------------------
 One joint posterior over a whole palette (Revigo: 20 pigments x 2 constants x 31 bands plus 84
