@@ -51,7 +51,9 @@ class PigmentLibrary:
     films : tuple of dict
         Per film: ``id``, ``recipe`` (pigment -> mass fraction), ``pigments``, ``stage``,
         ``used``, ``thickness_median``/``_q05``/``_q95`` and ``rms_log_deviation`` (rms of
-        ``log(measured / predicted)`` at the posterior median prediction; fit quality).
+        ``log(measured / predicted)`` at the posterior median prediction; fit quality); with
+        card factors also ``card_factors``, per card ``card``, ``median``, ``q05``, ``q95`` and
+        ``implausible`` (the 90 % interval beyond 3 prior sds, :data:`bayespig.library.build.IMPLAUSIBLE_SDS`).
     film_ids : tuple of str
         The ``film`` axis of :attr:`thickness`.
     thickness : numpy.ndarray

@@ -130,6 +130,7 @@ def pigment_report(library, pigment):
                  if f.get("thickness_median") is not None else "—")
             rms = f.get("rms_log_deviation")
             factors = ("; ".join(f"{c['card']} {c['median']:.3f} [{c['q05']:.3f}, {c['q95']:.3f}]"
+                                 + (" (beyond 3 prior sd: absorbs a misfit?)" if c.get("implausible") else "")
                                  for c in f.get("card_factors") or ()) or "—") if cards else None
             lines.append(f"| {f['id']} | {recipe} | {f.get('stage', '')} | {h} | "
                          + (f"{factors} | " if cards else "")

@@ -303,6 +303,7 @@ def test_card_factors_recover_a_known_card_and_the_constants(carded):
     for film in library.films:
         assert film["rms_log_deviation"] < 3 * EPS, film
         assert [c["card"] for c in film["card_factors"]] == [f"{film['id']}_ob_substrate", f"{film['id']}_ow_substrate"]
+        assert not any(c["implausible"] for c in film["card_factors"])  # 1.1 is one prior sd off
     (stage,) = library.stages
     assert not stage["max_steps_reached"]
     assert stage["card_factor_rhat_max"] <= 1.01 and stage["card_factor_ess_min"] >= 400
