@@ -25,7 +25,10 @@ On Revigo series 06 (Vermillion from 06A-06E, on a base library of series 07; 2 
 the factors mix (not capped, R-hat <= 1.006, ESS >= 1054 for every factor) but cost: 10 shared
 coordinates more (15), 60 walkers instead of 20, 9 351 steps and 643 s against 1 701 steps and
 65 s without (Kubelka-Munk: 7 730 steps, 211 s against 1 821, 41 s); the base stage (07A,
-07C-07F) at a 6 000-step cap: R-hat 1.020 with factors, 1.054 without, 324 s against 187 s.
+07C-07F) at a 6 000-step cap: R-hat 1.020 with factors, 1.054 without, 324 s against 187 s;
+with :data:`DEFAULT_SETTINGS` and factors it stopped at the 20 000-step cap (940 s, load 3-4)
+with R-hat <= 1.006 and ESS >= 791 for every thickness, constant and factor (the run-length
+rule's autocorrelation-time multiple, not R-hat or ESS, was unmet).
 Most factors stay near their prior (black cards) or within a few per cent of 1 (white cards),
 but 06D's white card went to the truncation of its prior (``f = 0.61``, thickness 1.18 -> 0.27,
 both film models): the factor absorbed a misfit of that film (its record marks it
