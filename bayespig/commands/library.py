@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import atomic_path
-from ._arguments import add_input_argument, add_output_argument, add_verbosity_arguments
+from ._arguments import add_input_argument, add_output_argument, add_substrate_argument, add_verbosity_arguments
 
 __all__ = ["add_library_parsers", "recipe_argument", "spectrum_argument"]
 
@@ -127,6 +127,7 @@ def add_library_parsers(subparsers):
                        help="film model (default radiative-transfer; kubelka-munk: the two-constant baseline)")
     build.add_argument("--films", default=None, help="only these films (comma-separated ids)")
     build.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    add_substrate_argument(build)  # as 'bayespig infer --substrate-sd': one factor per card and film
     add_verbosity_arguments(build)
     build.set_defaults(func=run_library_build)
 
@@ -201,8 +202,10 @@ def _say(args):
 
 def run_library_build(args):
     from ..data.spectral_table import read_revigo
+    from ..inference.arguments import check_substrate_sd
     from ..library import build_library
 
+    substrate_sd = check_substrate_sd(args.substrate_sd)  # before any file is read: infer's message
     path = Path(args.measurements)
     sets = read_revigo(path) if path.is_dir() else path
     if args.films and isinstance(sets, dict):
@@ -211,10 +214,12 @@ def run_library_build(args):
         if missing:
             raise ValueError(f"--films: {missing[0]!r} is not a film of {path}")
         sets = {f: sets[f] for f in wanted}
-    library = build_library(sets, model=args.model, seed=args.seed, progress=_say(args) or False)
+    library = build_library(sets, model=args.model, seed=args.seed, progress=_say(args) or False,
+                            substrate_sd=substrate_sd)
     library.save(args.out)
     print(f"wrote {args.out}: {len(library.pigments)} pigments ({', '.join(library.pigments)}), "
-          f"{library.wavelength_nm.size} wavelengths, model {library.model}")
+          f"{library.wavelength_nm.size} wavelengths, model {library.model}"
+          + ("" if substrate_sd is None else f", card factors (prior sd {substrate_sd:g} in log f)"))
     return 0
 
 

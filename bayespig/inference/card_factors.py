@@ -19,7 +19,8 @@ coordinates, block-wise moves, a pilot start); :func:`bayespig.infer` samples it
 ``substrate_sd=`` (the same ensembles, run-length rule and diagnostics as the per-wavelength
 runs, on the joint vector; one vectorised table call evaluates every wavelength of every
 walker) and stores the factors as the posterior variable ``r_s_factor`` over
-``(chain, draw, card)``.
+``(chain, draw, card)``. A pigment library's build samples the same spec over the cards of all
+films of a stage (:meth:`CardFactors.over_cards`, :func:`bayespig.library.build.card_factor_spec`).
 
 Identifiability: a factor is learned from the data only when the films over that card have
 more values per wavelength than parameters (multi-angle instruments, several film groups of one
@@ -116,23 +117,72 @@ class CardFactors(SharedParameter):
     def __init__(self, problem, card_index, relative_sd=DEFAULT_RELATIVE_SD, cards=None):
         if not (np.isfinite(relative_sd) and relative_sd > 0):
             raise ValueError(f"relative_sd must be a positive number, got {relative_sd!r}")
-        self.card_index = np.asarray(card_index, dtype=int)
+        card_index = np.asarray(card_index, dtype=int)
         n_reflectance = sum(f.kind == "reflectance" for f in problem.films)
-        if self.card_index.shape != (n_reflectance,):
+        if card_index.shape != (n_reflectance,):
             raise ValueError(f"card_index needs one entry per reflectance film ({n_reflectance}), "
-                             f"got shape {self.card_index.shape}")
-        self.n_cards = int(self.card_index.max()) + 1 if n_reflectance else 0
-        if self.n_cards == 0:
+                             f"got shape {card_index.shape}")
+        n_cards = int(card_index.max()) + 1 if n_reflectance else 0
+        if n_cards == 0:
             raise ValueError("substrate factors need at least one reflectance film over a card")
         if not problem.groups:
             raise ValueError("substrate factors need a film that does not hide its card")
-        r_s_max = np.zeros(self.n_cards)
+        r_s_max = np.zeros(n_cards)
         k = 0
         for film in problem.films:
             if film.kind == "reflectance":
-                c = self.card_index[k]
+                c = card_index[k]
                 r_s_max[c] = max(r_s_max[c], float(np.max(film.r_s)))
                 k += 1
+        self._set_cards(card_index, r_s_max, relative_sd, cards)
+
+    @classmethod
+    def over_cards(cls, card_index, r_s_max, relative_sd=DEFAULT_RELATIVE_SD, cards=None):
+        """The factors of any set of cards, without a :class:`~bayespig.likelihood.Problem`.
+
+        For a model whose reflectance films span several measurement sets (the films of a
+        pigment library's stage, :mod:`bayespig.library.build`: one factor per card and film,
+        every film's reflectance films concatenated in the model input ``r_s_scale``).
+
+        Parameters
+        ----------
+        card_index : array_like of int
+            Card of every reflectance film of the model, in the order of ``r_s_scale``'s
+            columns; ``-1`` for a film whose card gets no factor (an opaque film: ``r_s = 0``),
+            whose column is then 1.
+        r_s_max : array_like of float
+            Largest albedo seen from the binder of each card over the wavelengths [-], (n_cards,)
+            (the prior is truncated at ``f r_s_max <= 1``).
+        relative_sd : float
+            Prior sd of ``log f`` [-].
+        cards : sequence of str, optional
+            Card names (the labels; default ``"0"``, ``"1"``, ...).
+
+        Raises
+        ------
+        ValueError
+            Naming the argument: ``relative_sd`` not a positive number, no card, a card
+            index outside ``-1 .. n_cards - 1``, ``r_s_max`` or ``cards`` not one per card.
+        """
+        if not (np.isfinite(relative_sd) and relative_sd > 0):
+            raise ValueError(f"relative_sd must be a positive number, got {relative_sd!r}")
+        card_index = np.asarray(card_index, dtype=int)
+        r_s_max = np.asarray(r_s_max, dtype=float)
+        if r_s_max.ndim != 1 or r_s_max.size == 0:
+            raise ValueError(f"r_s_max needs one value per card (at least one), got shape {r_s_max.shape}")
+        if card_index.ndim != 1 or ((card_index < -1) | (card_index >= r_s_max.size)).any():
+            raise ValueError(f"card_index must be card numbers 0..{r_s_max.size - 1} (or -1: no factor), "
+                             f"got {card_index.tolist()}")
+        if cards is not None and len(cards) != r_s_max.size:
+            raise ValueError(f"cards must name every card ({r_s_max.size}), got {len(cards)}")
+        self = cls.__new__(cls)
+        self._set_cards(card_index, r_s_max, relative_sd, cards)
+        return self
+
+    def _set_cards(self, card_index, r_s_max, relative_sd, cards):
+        """The attributes of the spec from the cards of the reflectance films and their largest albedo."""
+        self.card_index = card_index
+        self.n_cards = r_s_max.size
         self.relative_sd = float(relative_sd)
         self.cards = self.labels = (tuple(str(c) for c in cards) if cards is not None
                                     else tuple(map(str, range(self.n_cards))))
@@ -141,6 +191,8 @@ class CardFactors(SharedParameter):
         self.upper = np.minimum(bound, -np.log(np.maximum(r_s_max, 1e-12)))  # r_s f <= 1
         self.nominal = np.zeros(self.n_cards)
         self.start_sd = np.full(self.n_cards, 0.01 * self.relative_sd)
+        #: reflectance films without a factor (index -1): their column of r_s_scale is 1
+        self._unscaled = None if (card_index >= 0).all() else card_index < 0
 
     def log_prior(self, x):
         """Normal in ``log f`` (up to a constant), (W,)."""
@@ -152,7 +204,11 @@ class CardFactors(SharedParameter):
 
     def model_inputs(self, x):
         """``r_s_scale``: every reflectance film's factor, (W, n_reflectance_films)."""
-        return {"r_s_scale": np.exp(x)[:, self.card_index]}
+        if self._unscaled is None:
+            return {"r_s_scale": np.exp(x)[:, self.card_index]}
+        scale = np.exp(x)[:, np.maximum(self.card_index, 0)]
+        scale[:, self._unscaled] = 1.0
+        return {"r_s_scale": scale}
 
     def describe_prior(self):
         """The factors' prior as text (for the provenance)."""

@@ -10,6 +10,30 @@ the constants being fitted (:class:`LibraryLayout`, ``k = 2 * n_pigments``), and
 thicknesses as the shared spec (:class:`bayespig.inference.film_thickness.FilmThickness`, prior
 ``log h ~ N(0, 0.5^2)`` unless measured): residual coordinates, block moves, one run per stage.
 
+The cards' uncertainty (``substrate_sd=``, as :func:`bayespig.infer`'s): every card each film
+is measured over gets a factor on its albedo, ``r_s = f r_s,card`` at every wavelength, ``log f
+~ N(0, substrate_sd^2)``, one per card and film (:func:`card_factor_spec`; the spec
+:class:`~bayespig.inference.card_factors.CardFactors` of ``infer``, over the cards of all the
+stage's films), sampled in the same joint run with the thicknesses and entering every film's
+prediction through :meth:`~bayespig.library.film_models.FilmPredictor.values`' ``r_s_scale``
+(both film models). Default None as in ``infer``: the cards as converted from their
+measurements. Simulated (``tests/library/test_build.py``): a white card 10 % brighter than
+measured left its film at 1.5 % rms against 1 % noise and 9 of 12 constants inside their 90 %
+intervals without factors; with ``substrate_sd=0.1`` the factor's 90 % interval was [1.04,
+1.16] around the true 1.1, the film at 0.1 %, 12 of 12 inside (the stage 20 s against 14 s).
+On Revigo series 06 (Vermillion from 06A-06E, on a base library of series 07; 2 shared cores)
+the factors mix (not capped, R-hat <= 1.006, ESS >= 1054 for every factor) but cost: 10 shared
+coordinates more (15), 60 walkers instead of 20, 9 351 steps and 643 s against 1 701 steps and
+65 s without (Kubelka-Munk: 7 730 steps, 211 s against 1 821, 41 s); the base stage (07A,
+07C-07F) at a 6 000-step cap: R-hat 1.020 with factors, 1.054 without, 324 s against 187 s;
+with :data:`DEFAULT_SETTINGS` and factors it stopped at the 20 000-step cap (940 s, load 3-4)
+with R-hat <= 1.006 and ESS >= 791 for every thickness, constant and factor (the run-length
+rule's autocorrelation-time multiple, not R-hat or ESS, was unmet).
+Most factors stay near their prior (black cards) or within a few per cent of 1 (white cards),
+but 06D's white card went to the truncation of its prior (``f = 0.61``, thickness 1.18 -> 0.27,
+both film models): the factor absorbed a misfit of that film (its record marks it
+``implausible``, :data:`IMPLAUSIBLE_SDS`).
+
 Stages: a cut (modular) posterior
 ---------------------------------
 One joint posterior over a whole palette (Revigo: 20 pigments x 2 constants x 31 bands plus 84
@@ -69,7 +93,8 @@ import numpy as np
 from scipy import optimize, sparse
 
 from .._pool import executor_or_local_pool
-from ..inference.arguments import check_flag
+from ..inference.arguments import check_flag, check_substrate_sd
+from ..inference.card_factors import FACTOR_PRIOR_SDS, CardFactors, card_indices
 from ..inference.film_thickness import FilmThickness
 from ..inference.settings import InferenceSettings
 from ..inference.shared import BlockLayout, sample_blocks
@@ -97,6 +122,11 @@ START_BALL_SD = 0.01
 LEAST_SQUARES_STARTS = ((0.01, 3.0), (0.3, 30.0), (0.001, 300.0), (0.6, 3.0))
 #: Points of the start ball (draws of :func:`~bayespig.inference.shared.sample_blocks`).
 START_POINTS = 64
+#: A card factor whose whole 90 % interval lies beyond this many prior sds of ``log f`` is
+#: marked ``implausible`` in the film's record (a card off by that much is not the ~10 % of the
+#: paper's section 3.4: the factor absorbs a misfit of the film; Revigo 06D's white card went to
+#: the prior's 5-sd truncation, f = 0.61, with its thickness from 1.18 to 0.27).
+IMPLAUSIBLE_SDS = 3.0
 
 def _film_model(name):
     if name not in FILM_MODELS:
@@ -108,7 +138,10 @@ class LibraryLayout(BlockLayout):
     """Block per wavelength: the constants ``[a_p, log sigma_p]`` of the pigments being fitted.
 
     The films' values from the fitted pigments' block, the fixed pigments' constants (earlier
-    stages' medians) and every film's thickness (model input ``thickness``, (W, n_films)).
+    stages' medians), every film's thickness (model input ``thickness``, (W, n_films)) and,
+    with card factors (:class:`~bayespig.inference.card_factors.CardFactors`), the factor on
+    every reflectance film's card albedo (model input ``r_s_scale``, (W, n_reflectance): the
+    films' reflectance films concatenated in film order, :attr:`scale_slices`).
 
     Parameters
     ----------
@@ -142,11 +175,13 @@ class LibraryLayout(BlockLayout):
         self.observed = np.concatenate([p.observed for p in self.predictors], axis=1)
         self.eps = np.concatenate([np.where(np.isfinite(p.eps), p.eps, eps) * np.ones(p.observed.shape[1])
                                    for p in self.predictors])
-        self.value_slices = []
-        start = 0
+        self.value_slices, self.scale_slices = [], []
+        start = scale_start = 0
         for p in self.predictors:
             self.value_slices.append(slice(start, start + p.observed.shape[1]))
+            self.scale_slices.append(slice(scale_start, scale_start + p.n_reflectance_films))
             start += p.observed.shape[1]
+            scale_start += p.n_reflectance_films
 
     def constants(self, theta):
         """Every pigment's constants (W, n_wl, n_fitted + n_fixed, 2) from blocks (W, n_wl, k)."""
@@ -159,8 +194,64 @@ class LibraryLayout(BlockLayout):
         """Values of every film, concatenated, (W, n_wl, n_values)."""
         constants = self.constants(theta)
         thickness = inputs["thickness"]
-        return np.concatenate([p.values(constants, c, thickness[:, f])
+        scale = inputs.get("r_s_scale")
+        return np.concatenate([p.values(constants, c, thickness[:, f],
+                                        r_s_scale=None if scale is None else scale[:, self.scale_slices[f]])
                                for f, (p, c) in enumerate(zip(self.predictors, self.concentrations))], axis=2)
+
+
+def card_factor_spec(films, sets, predictors, substrate_sd):
+    """The card factors of a stage group's films: one per card and film (the spec of the joint run).
+
+    As :func:`bayespig.infer` with ``substrate_sd`` does for one film
+    (:mod:`bayespig.inference.card_factors`): each card ``c`` a film is measured over gets a
+    factor, ``r_s = f r_s,card`` at every wavelength, ``log f ~ N(0, substrate_sd^2)``
+    truncated at its :data:`~bayespig.inference.card_factors.FACTOR_PRIOR_SDS` sds and at
+    ``f r_s <= 1``; here the cards of all the group's films, each film's its own (a card of one
+    film is not another's, even if named alike). A film that hides its card (opaque) gets no
+    factor there (``r_s = 0``). The largest albedo of a card is that of the film model's view of
+    it: ``r_s`` seen from the binder, or Kubelka-Munk's internal card reflectance.
+
+    Parameters
+    ----------
+    films : sequence of str
+        Film ids, in the layout's order.
+    sets : sequence of MeasurementSet
+    predictors : sequence of FilmPredictor
+    substrate_sd : float
+        Prior sd of ``log f`` [-].
+
+    Returns
+    -------
+    tuple
+        ``(spec, cards)``: the :class:`~bayespig.inference.card_factors.CardFactors` over the
+        cards (labels ``"<film>/<card>"``; None when no film shows a card), and per film the
+        names of its cards in the spec's order (tuple of tuples of str).
+    """
+    index, r_s_max, labels, per_film = [], [], [], []
+    for film, ms, predictor in zip(films, sets, predictors):
+        names, film_index = card_indices(ms, predictor.problem)
+        reflectance = [f for f in predictor.problem.films if f.kind == "reflectance"]
+        backgrounds = getattr(predictor, "backgrounds", None)  # Kubelka-Munk: internal card reflectance
+        local = {}
+        for k, (film_k, c) in enumerate(zip(reflectance, film_index)):
+            if film_k.opaque or names[c] == "hidden":
+                index.append(-1)
+                continue
+            if c not in local:
+                local[c] = len(labels)
+                labels.append(f"{film}/{names[c]}")
+                r_s_max.append(0.0)
+            j = local[c]
+            albedo = float(np.max(film_k.r_s))
+            if backgrounds is not None:
+                albedo = max(albedo, float(np.max(backgrounds[k])))
+            r_s_max[j] = max(r_s_max[j], albedo)
+            index.append(j)
+        per_film.append(tuple(names[c] for c in sorted(local, key=local.get)))
+    if not labels:
+        return None, tuple(per_film)
+    return CardFactors.over_cards(index, r_s_max, substrate_sd, labels), tuple(per_film)
 
 
 def representative_draw(constants):
@@ -311,6 +402,12 @@ def _fit_group(task):
     layout = LibraryLayout(film_model, predictors, task["concentrations"], task["pigments"],
                            task["fixed_constants"], task["eps"], wavelength_nm)
     spec = FilmThickness(task["films"], measured=task["measured"])
+    specs = [spec]
+    card_spec, film_cards = None, tuple(() for _ in task["films"])
+    if task.get("substrate_sd") is not None:
+        card_spec, film_cards = card_factor_spec(task["films"], sets, predictors, task["substrate_sd"])
+        if card_spec is not None:
+            specs.append(card_spec)
     start_seq, joint_seq, ball_seq = np.random.SeedSequence(task["seed"], spawn_key=task["spawn_key"]).spawn(3)
     centre = _least_squares_start(layout, np.exp(spec.nominal))
     rng = np.random.default_rng(ball_seq)
@@ -318,11 +415,11 @@ def _fit_group(task):
     room = np.minimum(centre - layout.lower, layout.upper - centre)
     sd = np.minimum(START_BALL_SD, 0.3 * np.maximum(room, 1e-9))
     draws = np.clip(centre + sd * rng.standard_normal((START_POINTS,) + centre.shape), layout.lower, layout.upper)
-    run, used, joint = sample_blocks(layout, [spec], draws, task["settings"], joint_seq, start_seq)
+    run, used, joint = sample_blocks(layout, specs, draws, task["settings"], joint_seq, start_seq)
     theta = run["theta"]
     n_chains, n_draws, n_dim = theta.shape
     flat = theta.reshape(-1, n_dim)
-    blocks, thickness = joint.unpack(flat)
+    blocks, thickness, *factors = joint.unpack(flat)
     constants = blocks.reshape(flat.shape[0], layout.n_wavelengths, len(layout.fitted), 2)
     # fit quality per film at the posterior median prediction
     predicted = np.median(joint.predict(flat), axis=0)  # (n_wl, n_values)
@@ -336,15 +433,23 @@ def _fit_group(task):
     ess_h = np.array([float(az.ess(chains[..., j])) for j in range(chains.shape[-1])])
     rhat_c = np.array([float(az.rhat(constant_chains[..., j])) for j in range(constant_chains.shape[-1])])
     ess_c = np.array([float(az.ess(constant_chains[..., j])) for j in range(constant_chains.shape[-1])])
+    card_diagnostics = {}
+    if card_spec is not None:
+        factor_chains = factors[0].reshape(n_chains, n_draws, -1)
+        rhat_f = [float(az.rhat(factor_chains[..., j])) for j in range(card_spec.size)]
+        ess_f = [float(az.ess(factor_chains[..., j])) for j in range(card_spec.size)]
+        card_diagnostics = {"card_factor_rhat_max": max(rhat_f), "card_factor_ess_min": min(ess_f)}
     return {
         "pigments": task["pigments"], "films": task["films"], "stage": task["stage"],
         "constants": constants, "thickness": thickness, "rms_log_deviation": rms,
+        "cards": film_cards, "card_factors": factors[0] if card_spec is not None else None,
         "diagnostics": {
             "stage": task["stage"], "pigments": list(task["pigments"]), "films": list(task["films"]),
             "n_steps": int(run["n_steps"]), "max_steps_reached": bool(run["max_steps_reached"]),
             "n_walkers": int(used.n_walkers), "n_ensembles": int(used.n_ensembles),
             "thickness_rhat_max": float(rhat_h.max()), "thickness_ess_min": float(ess_h.min()),
             "constants_rhat_max": float(rhat_c.max()), "constants_ess_min": float(ess_c.min()),
+            **card_diagnostics,
             "seconds": time.perf_counter() - start_time,
         },
     }
@@ -375,7 +480,8 @@ def _versions():
 
 
 def build_library(measurements, *, model="radiative-transfer", seed=0, executor=None, progress=True,
-                  densities=None, eps=0.02, base_pigments=None, thickness=None, settings=None, base=None):
+                  densities=None, eps=0.02, base_pigments=None, thickness=None, settings=None, base=None,
+                  substrate_sd=None):
     """A pigment library from films of known recipes (see the module docstring for the stages).
 
     Parameters
@@ -408,6 +514,15 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
         A library whose pigments count as fitted (its draws are the new library's for them, its
         medians fix them in the fits of the others): e.g. a white and a black fitted once and
         shared by many libraries (the leave-one-out study), built with the same model.
+    substrate_sd : float, optional
+        The cards' uncertainty, as :func:`bayespig.infer`'s ``substrate_sd``: every card a film
+        is measured over gets a factor on its albedo seen from the binder, ``r_s = f r_s,card``
+        at every wavelength, ``log f ~ N(0, substrate_sd^2)`` (e.g. 0.1 for the ~10 % of the
+        paper's section 3.4), one per card and film, sampled in each stage's joint run with the
+        thicknesses (:func:`card_factor_spec`); the library then holds their draws
+        (:attr:`PigmentLibrary.card_factor` over ``(draw, film, card)``). Default None, as
+        ``infer``'s: the cards as converted from their measurement (the draws are exactly
+        those of a build without the argument).
 
     Returns
     -------
@@ -418,6 +533,7 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
         raise TypeError(f"seed must be a non-negative integer, got {seed!r}")
     if not (np.isfinite(eps) and eps > 0):
         raise ValueError(f"eps must be a positive number, got {eps!r}")
+    substrate_sd = check_substrate_sd(substrate_sd)
     film_model = _film_model(model)
     settings = DEFAULT_SETTINGS if settings is None else settings
     sets = _read_measurements(measurements)
@@ -460,6 +576,7 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
                 "fixed_constants": (np.stack([medians[p] for p in fixed], axis=1) if fixed else None),
                 "measured": np.array([thickness.get(f, np.nan) for f in films], dtype=float),
                 "eps": float(eps), "settings": settings, "seed": int(seed), "spawn_key": (s, g),
+                "substrate_sd": substrate_sd,
             })
         stage_start = time.perf_counter()
         def report(result):
@@ -468,7 +585,10 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
                 print(f"library stage {s}/{len(stages)}: {', '.join(d['pigments'])} from {len(d['films'])} films: "
                       f"{d['n_steps']} steps{' (capped)' if d['max_steps_reached'] else ''}, "
                       f"R-hat <= {max(d['thickness_rhat_max'], d['constants_rhat_max']):.3f}, "
-                      f"thickness ESS >= {d['thickness_ess_min']:.0f}, {d['seconds']:.1f} s",
+                      f"thickness ESS >= {d['thickness_ess_min']:.0f}"
+                      + (f", card factors R-hat <= {d['card_factor_rhat_max']:.3f}, ESS >= "
+                         f"{d['card_factor_ess_min']:.0f}" if "card_factor_rhat_max" in d else "")
+                      + f", {d['seconds']:.1f} s",
                       file=sys.stderr, flush=True)
             return result
 
@@ -489,11 +609,11 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
                   file=sys.stderr, flush=True)
         results.extend(done)
     return _assemble(film_model, results, recipes, unused, wavelengths[0], seed, settings, eps, densities,
-                     base_pigments, model, stages, time.perf_counter() - start, base)
+                     base_pigments, model, stages, time.perf_counter() - start, base, substrate_sd)
 
 
 def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, settings, eps, densities,
-              base_pigments, model, stages, seconds, base=None):
+              base_pigments, model, stages, seconds, base=None, substrate_sd=None):
     """The library from the stage groups' results (and a base library's pigments first)."""
     parts = [r["constants"] for r in results] + ([] if base is None else [base.constants])
     if not parts:
@@ -504,18 +624,42 @@ def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, setting
     film_ids = tuple(sorted(recipes))
     thickness = np.full((n_draws, len(film_ids)), np.nan)
     films = {}
+    card_factor = card_names = None
+    if substrate_sd is not None:
+        n_cards = max([len(c) for r in results for c in r["cards"]] + [1])
+        card_factor = np.full((n_draws, len(film_ids), n_cards), np.nan)
+        card_names = [[""] * n_cards for _ in film_ids]
     for r in results:
+        column = 0
         for j, f in enumerate(r["films"]):
             h = r["thickness"][:n_draws, j]
             thickness[:, film_ids.index(f)] = h
             films[f] = {"stage": r["stage"], "used": True, "rms_log_deviation": r["rms_log_deviation"][j],
                         "thickness_median": float(np.median(h)),
                         "thickness_q05": float(np.quantile(h, 0.05)), "thickness_q95": float(np.quantile(h, 0.95))}
+            if card_factor is not None:
+                factors = []
+                for c, card in enumerate(r["cards"][j]):
+                    values = r["card_factors"][:n_draws, column]
+                    column += 1
+                    card_factor[:, film_ids.index(f), c] = values
+                    card_names[film_ids.index(f)][c] = card
+                    q05, q95 = np.quantile(values, [0.05, 0.95])
+                    factors.append({"card": card, "median": float(np.median(values)),
+                                    "q05": float(q05), "q95": float(q95),
+                                    # the whole 90 % interval beyond 3 prior sds (prior mass 0.3 %): the
+                                    # factor absorbs a misfit of the film rather than measures its card
+                                    "implausible": bool(np.log(q05) > IMPLAUSIBLE_SDS * substrate_sd
+                                                        or np.log(q95) < -IMPLAUSIBLE_SDS * substrate_sd)})
+                films[f]["card_factors"] = factors
     records = []
     for f in film_ids:
         entry = {"id": f, "recipe": dict(recipes[f].amounts), "pigments": sorted(recipes[f].amounts)}
-        entry.update(films.get(f, {"stage": None, "used": False, "rms_log_deviation": None,
-                                   "thickness_median": None, "thickness_q05": None, "thickness_q95": None}))
+        unused_entry = {"stage": None, "used": False, "rms_log_deviation": None,
+                        "thickness_median": None, "thickness_q05": None, "thickness_q95": None}
+        if card_factor is not None:
+            unused_entry["card_factors"] = []
+        entry.update(films.get(f, unused_entry))
         records.append(entry)
     base_medians = [] if base is None else [f["thickness_median"] for f in base.films
                                             if f.get("used") and f.get("thickness_median")]
@@ -531,9 +675,15 @@ def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, setting
                                                    "provenance": base.provenance},
         "method": "staged (cut) posterior, bayespig.library.build",
     }
+    if substrate_sd is not None:  # absent otherwise: a build without card factors is recorded as before
+        provenance["substrate_sd"] = float(substrate_sd)
+        provenance["card_factor_prior"] = (f"r_s = f r_s,card per card and film at every wavelength, log f ~ "
+                                           f"N(0, {substrate_sd:g}^2), truncated at {FACTOR_PRIOR_SDS:g} sd and at "
+                                           "r_s f <= 1 (bayespig.inference.card_factors)")
     return PigmentLibrary(
         model=model, pigments=pigments, wavelength_nm=np.asarray(wavelength_nm, dtype=float),
         constants=constants, constant_names=tuple(film_model.constant_names), thickness_prior=thickness_prior,
         films=tuple(records), film_ids=film_ids, thickness=thickness,
         densities=None if densities is None else dict(densities), model_error=None, provenance=provenance,
-        stages=tuple(r["diagnostics"] for r in results) + (() if base is None else tuple(base.stages)))
+        stages=tuple(r["diagnostics"] for r in results) + (() if base is None else tuple(base.stages)),
+        card_factor=card_factor, card_names=None if card_names is None else tuple(map(tuple, card_names)))

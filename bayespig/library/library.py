@@ -4,8 +4,12 @@ Made by :func:`bayespig.library.build_library`; read back by :func:`load_library
 is an arviz InferenceData netCDF (:func:`bayespig.inference.save_inference`'s format): group
 ``posterior`` holds ``constants`` over ``(chain, draw, wavelength, pigment, constant)`` (one
 chain: the draws of each pigment come from its own stage, see :mod:`bayespig.library.build`)
-and ``film_thickness`` over ``(chain, draw, film)`` (NaN for films no stage used); the rest
-(films, stages, provenance, densities, model error) is JSON in the posterior's attributes.
+and ``film_thickness`` over ``(chain, draw, film)`` (NaN for films no stage used); a library
+built with card factors (``build_library(..., substrate_sd=...)``) also ``card_factor`` over
+``(chain, draw, film, card)``, ``card`` the card's place among its film's cards (0, 1, ...; NaN
+where a film has fewer cards or was unused) and the cards' names in the attribute
+``card_names``; the rest (films, stages, provenance, densities, model error) is JSON in the
+posterior's attributes.
 """
 
 from __future__ import annotations
@@ -47,7 +51,9 @@ class PigmentLibrary:
     films : tuple of dict
         Per film: ``id``, ``recipe`` (pigment -> mass fraction), ``pigments``, ``stage``,
         ``used``, ``thickness_median``/``_q05``/``_q95`` and ``rms_log_deviation`` (rms of
-        ``log(measured / predicted)`` at the posterior median prediction; fit quality).
+        ``log(measured / predicted)`` at the posterior median prediction; fit quality); with
+        card factors also ``card_factors``, per card ``card``, ``median``, ``q05``, ``q95`` and
+        ``implausible`` (the 90 % interval beyond 3 prior sds, :data:`bayespig.library.build.IMPLAUSIBLE_SDS`).
     film_ids : tuple of str
         The ``film`` axis of :attr:`thickness`.
     thickness : numpy.ndarray
@@ -61,7 +67,15 @@ class PigmentLibrary:
     provenance : dict
         Seed, settings, package versions, stage plan.
     stages : tuple of dict
-        Per stage group: pigments, films, steps, cap, R-hat and ESS of thicknesses and constants.
+        Per stage group: pigments, films, steps, cap, R-hat and ESS of thicknesses and constants
+        (and of the card factors when sampled).
+    card_factor : numpy.ndarray or None
+        Draws of the factor ``f`` of every film's cards, ``r_s = f r_s,card`` [-], (n_draws,
+        n_films, n_cards) (``n_cards`` the most cards of one film; NaN where a film has fewer or
+        was unused); None for a library built without card factors.
+    card_names : tuple of tuple of str or None
+        Per film (the order of :attr:`film_ids`) the names of its cards along ``card`` (``""``
+        where it has fewer).
     """
 
     model: str
@@ -77,6 +91,8 @@ class PigmentLibrary:
     model_error: np.ndarray | None
     provenance: dict
     stages: tuple
+    card_factor: np.ndarray | None = None
+    card_names: tuple | None = None
 
     def __repr__(self):
         return (f"PigmentLibrary({self.model!r}, {len(self.pigments)} pigments, {len(self.film_ids)} films, "
@@ -100,6 +116,10 @@ class PigmentLibrary:
         }
         coords = {"chain": [0], "draw": np.arange(self.constants.shape[0]), "wavelength": self.wavelength_nm,
                   "pigment": list(self.pigments), "constant": list(self.constant_names), "film": list(self.film_ids)}
+        if self.card_factor is not None:
+            data["card_factor"] = (("chain", "draw", "film", "card"), np.asarray(self.card_factor, dtype=float)[None])
+            coords["card"] = np.arange(self.card_factor.shape[2])
+            attrs["card_names"] = json.dumps([list(names) for names in self.card_names])
         if self.model_error is not None:
             error = np.asarray(self.model_error, dtype=float)
             if error.ndim == 2:  # a covariance over wavelengths
@@ -109,6 +129,9 @@ class PigmentLibrary:
                 data["model_error"] = (("wavelength",), error)
         posterior = xr.Dataset(data, coords=coords, attrs=attrs)
         posterior["wavelength"].attrs["units"] = "nm"
+        if "card_factor" in posterior:
+            posterior["card_factor"].attrs.update(
+                long_name="factor on the card's albedo seen from the binder, r_s / r_s,card", units="1")
         return az.InferenceData(posterior=posterior)
 
     def save(self, path):
@@ -145,6 +168,10 @@ def load_library(path):
                          f"{LIBRARY_FORMAT} attribute)")
     attrs = posterior.attrs
     model_error = posterior["model_error"].values if "model_error" in posterior else None
+    card_factor = (np.asarray(posterior["card_factor"].values[0], dtype=float) if "card_factor" in posterior
+                   else None)
+    card_names = (tuple(tuple(str(c) for c in names) for names in json.loads(attrs["card_names"]))
+                  if card_factor is not None else None)
     return PigmentLibrary(
         model=str(attrs["model"]), pigments=tuple(str(p) for p in posterior["pigment"].values),
         wavelength_nm=np.asarray(posterior["wavelength"].values, dtype=float),
@@ -154,4 +181,5 @@ def load_library(path):
         films=tuple(json.loads(attrs["films"])), film_ids=tuple(str(f) for f in posterior["film"].values),
         thickness=np.asarray(posterior["film_thickness"].values[0], dtype=float),
         densities=json.loads(attrs["densities"]), model_error=model_error,
-        provenance=json.loads(attrs["provenance"]), stages=tuple(json.loads(attrs["stages"])))
+        provenance=json.loads(attrs["provenance"]), stages=tuple(json.loads(attrs["stages"])),
+        card_factor=card_factor, card_names=card_names)

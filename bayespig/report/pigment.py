@@ -5,8 +5,9 @@ For each pigment of a :class:`~bayespig.library.library.PigmentLibrary`:
 - its two constants per wavelength (radiative transfer: relative absorption ``a`` and the
   extinction ``sigma`` per unit concentration and film thickness; Kubelka-Munk: ``K`` and
   ``S``) with 50 % and 90 % bands (figure and CSV);
-- the films it came from (recipe, the stage of the build, the thickness's posterior) and how
-  well each is reproduced (rms of ``log(measured / predicted)``);
+- the films it came from (recipe, the stage of the build, the thickness's posterior, the
+  posterior of its cards' albedo factors when the library was built with ``substrate_sd``) and
+  how well each is reproduced (rms of ``log(measured / predicted)``);
 - the correlations between its parameters: per wavelength between its two constants, and a
   corner plot of both constants at the wavelength where they are most correlated;
 - the convergence of the stage that fitted it (steps, R-hat, ESS).
@@ -102,7 +103,9 @@ def pigment_report(library, pigment):
                   f"{stage.get('n_steps', '?')} steps"
                   + (" (capped: NOT converged)" if stage.get("max_steps_reached") else "")
                   + f", R-hat <= {rhat:.3f}, ESS >= {stage.get('constants_ess_min', np.nan):.0f} (constants), "
-                  f"{stage.get('thickness_ess_min', np.nan):.0f} (thicknesses).", ""]
+                  f"{stage.get('thickness_ess_min', np.nan):.0f} (thicknesses)"
+                  + (f"; card factors R-hat <= {stage['card_factor_rhat_max']:.3f}, ESS >= "
+                     f"{stage['card_factor_ess_min']:.0f}" if "card_factor_rhat_max" in stage else "") + ".", ""]
     lines += [f"![constants]({name}.png)", "", "## Constants (median and 90 % interval)", "",
               "| wavelength [nm] | " + " | ".join(label for label, _, _ in constants) + " | correlation |",
               "|---|---|---|---|"]
@@ -117,15 +120,21 @@ def pigment_report(library, pigment):
               f"![corner]({name}-corner.png)", "",
               "## The films it came from", ""]
     if films:
-        lines += ["| film | recipe (mass fractions) | stage | thickness h, median [90 %] | rms log(measured/predicted) |",
-                  "|---|---|---|---|---|"]
+        cards = any("card_factors" in f for f in films)
+        lines += ["| film | recipe (mass fractions) | stage | thickness h, median [90 %] | "
+                  + ("card factors f = r_s / r_s,card, median [90 %] | " if cards else "")
+                  + "rms log(measured/predicted) |", "|---|---|---|---|" + ("---|" if cards else "") + "---|"]
         for f in films:
             recipe = ", ".join(f"{p} {w:.3g}" for p, w in f.get("recipe", {}).items())
             h = (f"{f['thickness_median']:.3g} [{f['thickness_q05']:.3g}, {f['thickness_q95']:.3g}]"
                  if f.get("thickness_median") is not None else "—")
             rms = f.get("rms_log_deviation")
+            factors = ("; ".join(f"{c['card']} {c['median']:.3f} [{c['q05']:.3f}, {c['q95']:.3f}]"
+                                 + (" (beyond 3 prior sd: absorbs a misfit?)" if c.get("implausible") else "")
+                                 for c in f.get("card_factors") or ()) or "—") if cards else None
             lines.append(f"| {f['id']} | {recipe} | {f.get('stage', '')} | {h} | "
-                         f"{'—' if rms is None else format(rms, '.3g')} |")
+                         + (f"{factors} | " if cards else "")
+                         + f"{'—' if rms is None else format(rms, '.3g')} |")
     else:
         lines.append("No film of the library contains it.")
     lines += ["", _provenance(library), ""]
@@ -139,7 +148,7 @@ def _column(label):
 
 def _provenance(library):
     p = library.provenance or {}
-    items = [f"{key} {p[key]}" for key in ("seed", "eps") if key in p]
+    items = [f"{key} {p[key]}" for key in ("seed", "eps", "substrate_sd") if key in p]
     versions = p.get("versions")
     if isinstance(versions, dict):
         items.append("versions " + ", ".join(f"{k} {v}" for k, v in versions.items()))

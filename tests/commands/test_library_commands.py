@@ -71,3 +71,18 @@ def test_match_a_lab_target(library_file, capsys):
     text = capsys.readouterr().out
     assert text.startswith("recipe (mass fractions): ")
     assert "equally good matches" in text
+
+
+@pytest.mark.parametrize("value, message", [
+    ("-0.1", "substrate_sd must be a positive number (the prior sd of log f, e.g. 0.1 for 10 %) or None, got -0.1"),
+    ("nan", "substrate_sd must be a positive number (the prior sd of log f, e.g. 0.1 for 10 %) or None, got nan"),
+])
+def test_library_build_refuses_a_bad_substrate_sd_before_reading(tmp_path, capsys, value, message):
+    """``--substrate-sd`` as in ``bayespig infer`` (its check and message), before the
+    measurements are read (here a file that does not exist as a library input) or a file written."""
+    source = tmp_path / "films.csv"
+    source.write_text("not read\n")
+    out = tmp_path / "library.nc"
+    assert main(["library", "build", str(source), "--out", str(out), "--substrate-sd", value]) == 2
+    assert capsys.readouterr().err.strip() == f"bayespig: error: {message}"
+    assert not out.exists()

@@ -92,3 +92,36 @@ def test_film_thickness_prior_and_model_input():
 def test_film_thickness_bad_arguments(kwargs, message):
     with pytest.raises(ValueError, match=message):
         FilmThickness(**kwargs)
+
+
+def test_card_factors_over_cards_is_the_spec_of_a_problem(film):
+    """CardFactors.over_cards with a problem's cards and their largest albedo is the problem's
+    spec (box, prior, model input); a card index -1 (no factor) gives a column of 1."""
+    ms, problem, _ = film
+    cards, index = card_indices(ms, problem)
+    spec = CardFactors(problem, index, 0.1, cards)
+    reflectance = [f for f in problem.films if f.kind == "reflectance"]
+    r_s_max = [max(float(np.max(f.r_s)) for f, c in zip(reflectance, index) if c == card) for card in range(len(cards))]
+    general = CardFactors.over_cards(index, r_s_max, 0.1, cards)
+    for name in ("labels", "relative_sd", "n_cards"):
+        assert getattr(general, name) == getattr(spec, name)
+    for name in ("card_index", "lower", "upper", "nominal", "start_sd"):
+        np.testing.assert_array_equal(getattr(general, name), getattr(spec, name))
+    x = np.random.default_rng(1).normal(0.0, 0.1, (5, spec.size))
+    np.testing.assert_array_equal(general.log_prior(x), spec.log_prior(x))
+    np.testing.assert_array_equal(general.model_inputs(x)["r_s_scale"], spec.model_inputs(x)["r_s_scale"])
+    partial = CardFactors.over_cards([0, -1, 1], [0.5, 0.9], 0.1, ["a", "b"])
+    np.testing.assert_array_equal(partial.model_inputs(x[:, :2])["r_s_scale"],
+                                  np.stack([np.exp(x[:, 0]), np.ones(5), np.exp(x[:, 1])], axis=1))
+    np.testing.assert_allclose(partial.upper, [0.5, -np.log(0.9)])  # 5 sd, or where f r_s reaches 1
+
+
+@pytest.mark.parametrize("args, message", [
+    (([0, 2], [0.5, 0.5]), r"card_index must be card numbers 0\.\.1 \(or -1: no factor\), got \[0, 2\]"),
+    (([0], []), "r_s_max needs one value per card"),
+    (([0], [0.5], 0.1, ["a", "b"]), r"cards must name every card \(1\), got 2"),
+    (([0], [0.5], -1.0), "relative_sd must be a positive number, got -1.0"),
+])
+def test_card_factors_over_cards_bad_arguments(args, message):
+    with pytest.raises(ValueError, match=message):
+        CardFactors.over_cards(*args)
