@@ -23,6 +23,7 @@ from bayespig.inference.roughness import BinderIndexSpec, RoughnessSpec
 from bayespig.instruments import get_instrument
 from bayespig.likelihood import ForwardModel, Problem
 from bayespig.physics.forward import brdf
+from bayespig.report.quantities import prior_edges
 from bayespig.rough_table import (
     ROUGH_TABLE_TOLERANCE,
     BinderIndexRoughTables,
@@ -162,9 +163,15 @@ def test_binder_index_and_roughness_are_recovered_together(n_idata):
     assert ((low <= A_TRUE) & (A_TRUE <= high)).all(), (low, high)
 
 
-def test_binder_index_prior_is_recorded(n_idata):
+def test_binder_index_prior_is_recorded_and_its_edges_flagged(n_idata):
     bounds = json.loads(n_idata.posterior.attrs[PRIOR_BOUNDS_ATTR])["binder_index"]
     assert bounds == {"lower": [pytest.approx(1.45)], "upper": [pytest.approx(1.69)], "scale": "linear"}
+    assert not [e for e in prior_edges(n_idata) if e["variable"] == "binder_index"]
+    piled = n_idata.copy()
+    draws = piled.posterior["binder_index"].values
+    piled.posterior["binder_index"].values = 1.69 - np.abs(draws - draws.mean())  # against the upper bound
+    flagged = [e for e in prior_edges(piled) if e["variable"] == "binder_index"]
+    assert [(e["parameter"], e["bound"]) for e in flagged] == [("binder_index[surface]", "upper")]
     described = json.loads(n_idata.posterior.attrs["binder_index_prior"])
     assert described["prior"] == ("normal, mean 1.5, sd 0.1, truncated to [1.45, 1.69] (the binder-index "
                                   "tables' range), one n for every film of the set")
