@@ -172,8 +172,9 @@ def joint_constants(library, pigments):
     info = (library.provenance or {}).get("conditioning") or {}
     parents = info.get("conditioned_on") or {}
     values = info.get("fixed_constants") or {}
+    pigments = [str(p) for p in pigments]
     # every pigment a recipe pigment depends on, through any chain of stages
-    todo, ancestors = [p for p in pigments], set()
+    todo, ancestors = list(pigments), set()
     while todo:
         for parent in parents.get(todo.pop(), ()):
             if parent not in ancestors:
