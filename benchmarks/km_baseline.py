@@ -39,6 +39,14 @@ predicting each film over its black and its white card is compared like for like
 defaults ``--k1 0.04 --k2 0.6`` 2.61 / 3.49 against the opaque reflectance (2.82 / 5.31 over
 both cards), without any correction (``--k1 0 --k2 0``) 2.48 / 3.63 (3.10 / 4.93).
 
+Mass or volume fractions (``--concentrations volume``: the library's default pigment densities,
+:data:`bayespig.library.recipes.DEFAULT_DENSITIES`) make no difference that matters: 2.60 / 2.79
+on the 50/50 tints (identical), 3.39 / 5.39 on the black shades (3.41 / 5.36 with mass
+fractions). In two-constant mixing a pigment's ``K`` and ``S`` per unit concentration absorb its
+density (``phi_i K_i = W_i (K_i / rho_i) / V``, the film's volume ``V`` common to all its
+pigments and cancelling in ``K/S``); only the bone black's least-squares fit over its four
+films sees the change, through the weights of its rows (each scales with its film's volume).
+
 Series 07 (the white and black themselves) and 08 (lead white, whose colour films have no
 masstone or 10/90 tint in the series) are calibration or outside this protocol.
 """
@@ -73,6 +81,15 @@ def fractions(composition):
     return {p: r / ratios.sum() for p, r in zip(composition["pigments"], ratios) if r > 0}
 
 
+def volume_fractions(mass_fractions):
+    """Pigment -> volume fraction from mass fractions with the library's default densities."""
+    from bayespig.library.recipes import density_of
+
+    volumes = {p: w / density_of(p) for p, w in mass_fractions.items()}
+    total = sum(volumes.values())
+    return {p: v / total for p, v in volumes.items()}
+
+
 def calibrate(ms, k1, k2):
     """``K/S`` (n_wl,) and the measured (over black, over white), (2, n_wl), of a film."""
     cards = [ms.sample(f"{ms.metadata['film_id']}_{s}").reflectance[:, 0] for s in ("b", "w")]
@@ -96,6 +113,9 @@ def main(argv=None):
                         help="Saunderson k1 (default the Fresnel value r_F(8 deg) of n = 1.45)")
     parser.add_argument("--k2", type=float, default=None,
                         help="Saunderson k2 (default the internal diffuse reflectance of n = 1.45)")
+    parser.add_argument("--concentrations", choices=("mass", "volume"), default="mass",
+                        help="mass fractions (default) or volume fractions with the library's default "
+                             "pigment densities (bayespig.library.recipes.DEFAULT_DENSITIES)")
     args = parser.parse_args(argv)
     if not (args.revigo / "revigo-mixture-specifications.txt").exists():
         print(f"Revigo data not found at {args.revigo} (give --revigo FOLDER)", file=sys.stderr)
@@ -105,7 +125,9 @@ def main(argv=None):
     k1, k2 = (k1 if args.k1 is None else args.k1), (k2 if args.k2 is None else args.k2)
     wl = next(iter(sets.values())).wavelength_nm
     cal = {film_id: calibrate(ms, k1, k2) for film_id, ms in sets.items()}
-    recipe = {film_id: fractions(ms.metadata["composition"]) for film_id, ms in sets.items()}
+    mass = {film_id: fractions(ms.metadata["composition"]) for film_id, ms in sets.items()}
+    # the concentrations of Duncan's rule; the films are told apart by their mass fractions
+    recipe = mass if args.concentrations == "mass" else {f: volume_fractions(m) for f, m in mass.items()}
 
     # the white: S = 1, K = its K/S
     K = {WHITE: cal[WHITE_MASSTONE][0].copy()}
@@ -122,7 +144,7 @@ def main(argv=None):
         (K[BLACK][i], S[BLACK][i]), _ = optimize.nnls(np.array(rows), np.array(rhs))
     print(f"bayespig {bayespig.__version__}; Revigo at {args.revigo}; Saunderson k1 = {k1:.4f}, "
           f"k2 = {k2:.4f} ({'given' if args.k1 is not None or args.k2 is not None else 'Fresnel'}, "
-          f"n = {N_BINDER}, {THETA_I:g} deg, SCE); D65, CIE 1964 10 deg")
+          f"n = {N_BINDER}, {THETA_I:g} deg, SCE); D65, CIE 1964 10 deg; {args.concentrations} fractions")
     print(f"bone black from {', '.join(BLACK_MIXTURES)}: K/S median {np.median(K[BLACK] / S[BLACK]):.1f}, "
           f"S median {np.median(S[BLACK]):.2f} (zinc white S = 1)")
 
@@ -133,7 +155,7 @@ def main(argv=None):
         masstone = f"{series}A"
         pigment = next(p for p in recipe[masstone])
         tints = [f for f in ids if set(recipe[f]) == {pigment, WHITE}]
-        tint_b = min(tints, key=lambda f: abs(recipe[f][pigment] - 0.1))
+        tint_b = min(tints, key=lambda f: abs(mass[f][pigment] - 0.1))
         r_P = cal[masstone][0]
         c_P, c_W = recipe[tint_b][pigment], recipe[tint_b][WHITE]
         ratio_b = cal[tint_b][0]
@@ -143,7 +165,7 @@ def main(argv=None):
         K[pigment], S[pigment] = r_P * S_P, S_P
         for film_id in ids:
             parts = recipe[film_id]
-            if set(parts) == {pigment, WHITE} and abs(parts[pigment] - 0.5) < 0.1:
+            if set(parts) == {pigment, WHITE} and abs(mass[film_id][pigment] - 0.5) < 0.1:
                 kind = "50/50 tints"
             elif set(parts) == {pigment, BLACK}:
                 kind = "black shades"

@@ -54,8 +54,15 @@ tinting pigment, never the white it was fitted with), the fixed pigments' uncert
 propagated into the later stages' fits, and a film all of whose pigments were fitted before it
 could be used (Revigo: the two-colour mixtures 08D-08G, 16D-16F, 17D, 17F) is not used at all
 (marked ``used=False`` in :attr:`PigmentLibrary.films`; a candidate for validation). The
-library's draws of each pigment are those of its own stage, independent between stages, so a
-prediction with the library's draws does carry every pigment's posterior uncertainty. Where an
+library's draws of each pigment are those of its own stage, independent between stages; a later
+stage's draws are valid only *together with the values its fixed pigments were fixed at*
+(``provenance["conditioning"]``: each pigment's fixed pigments and those values), and a
+prediction must pair them so (:func:`bayespig.library.predict.joint_constants`). Pairing them
+with independent draws of the fixed pigments instead mispredicts wherever the earlier stage left
+a direction unidentified: Revigo's white and black films hide their cards below ~510 nm, so
+there ``log sigma`` of both is bounded only from below (posterior sd 2.4, against 0.3 above), and
+a vermilion fitted relative to the fixed white's ``sigma`` predicted its 50/50 tint 06C at ΔE00
+10.7 with independent white draws, 1.0 with the fixed one. Where an
 earlier pigment's posterior is wide (a nearly opaque white's ``sigma`` is bounded only from
 below by its films), its median is a poor point to fix, and the later films it tints can then
 be fitted worse than their noise: each film's ``rms_log_deviation`` shows it (simulated: a white
@@ -561,6 +568,13 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
         for j, p in enumerate(base.pigments):
             medians[p] = base.constants[k, :, j]
     stages, unused = stage_plan(recipes, base_pigments, known=known)
+    # what every fitted pigment was conditioned on (the fixed pigments of its group) and the values it was
+    # fixed at: a prediction pairs its draws with those values (bayespig.library.predict.joint_constants)
+    conditioned_on, fixed_constants = {}, {}
+    if base is not None:
+        inherited = base.provenance.get("conditioning") or {}
+        conditioned_on.update(inherited.get("conditioned_on", {}))
+        fixed_constants.update({p: np.asarray(v, dtype=float) for p, v in inherited.get("fixed_constants", {}).items()})
     n_wl = wavelengths[0].size
     results = []
     start = time.perf_counter()
@@ -568,6 +582,10 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
         tasks = []
         for g, (pigments, films) in enumerate(groups):
             fixed = sorted({p for f in films for p in recipes[f].amounts} - set(pigments))
+            for p in pigments:
+                conditioned_on[p] = list(fixed)
+            for p in fixed:
+                fixed_constants[p] = medians[p]
             order = tuple(pigments) + tuple(fixed)
             tasks.append({
                 "model": model, "measurements": [_portable(sets[f]) for f in films], "films": films,
@@ -608,8 +626,11 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
             print(f"library stage {s}/{len(stages)} done in {time.perf_counter() - stage_start:.1f} s",
                   file=sys.stderr, flush=True)
         results.extend(done)
-    return _assemble(film_model, results, recipes, unused, wavelengths[0], seed, settings, eps, densities,
-                     base_pigments, model, stages, time.perf_counter() - start, base, substrate_sd)
+    library = _assemble(film_model, results, recipes, unused, wavelengths[0], seed, settings, eps, densities,
+                        base_pigments, model, stages, time.perf_counter() - start, base, substrate_sd)
+    conditioning = {"conditioned_on": conditioned_on,
+                    "fixed_constants": {p: np.asarray(v, dtype=float).tolist() for p, v in fixed_constants.items()}}
+    return dataclasses.replace(library, provenance={**library.provenance, "conditioning": conditioning})
 
 
 def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, settings, eps, densities,

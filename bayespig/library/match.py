@@ -33,7 +33,7 @@ from scipy import optimize
 from .. import colorimetry
 from .._validation import integer, seed as check_seed
 from ..physics.mixtures import concentrations_from_mass_fractions
-from .predict import DEFAULT_LEVEL, _thickness_argument, model_reflectance, predict_paint
+from .predict import DEFAULT_LEVEL, _thickness_argument, joint_constants, model_reflectance, predict_paint
 from .recipes import DEFAULT_BINDER_DENSITY, Recipe, density_of
 
 __all__ = ["DEFAULT_SECOND_ILLUMINANT", "PaintMatch", "match_paint"]
@@ -168,7 +168,8 @@ def match_paint(library, target, *, pigments=None, instrument, thickness="opaque
             raise ValueError("thickness must be a relative thickness, 'opaque' or 'fit' for a match")
     lab_target, lab_target2, _ = _target(library, target, illuminant, second_illuminant, observer)
     wl = library.wavelength_nm
-    median_constants = np.median(library.constants, axis=0)
+    joint = joint_constants(library, allowed)  # pigments fitted with others fixed: paired with those values
+    median_constants = np.median(joint, axis=0)
     P = len(allowed)
     columns = np.array([library.pigments.index(p) for p in allowed])
     densities = np.array([density_of(p, library.densities) for p in allowed])
@@ -242,8 +243,8 @@ def match_paint(library, target, *, pigments=None, instrument, thickness="opaque
     if n_spread and n_free:
         rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(
             np.random.SeedSequence(seed).spawn(1)[0])
-        picks = rng.choice(library.constants.shape[0], size=n_spread, replace=n_spread > library.constants.shape[0])
-        spread = np.array([unpack(search(library.constants[i], [best_x], polish=False)[0])[0] for i in picks])
+        picks = rng.choice(joint.shape[0], size=n_spread, replace=n_spread > joint.shape[0])
+        spread = np.array([unpack(search(joint[i], [best_x], polish=False)[0])[0] for i in picks])
         tail = (1.0 - level) / 2.0
         for j, p in enumerate(allowed):
             low, high = np.quantile(spread[:, j], [tail, 1.0 - tail])

@@ -1,6 +1,7 @@
 """The colour of any recipe from a pigment library: spectra as draws, CIELAB, a credible ΔE00 region.
 
-A prediction pushes posterior draws of the library's constants through the library's film model
+A prediction pushes joint posterior draws of the library's constants (:func:`joint_constants`: a
+pigment fitted with others fixed is paired with their fixed values) through the library's film model
 (radiative transfer or Kubelka-Munk, :mod:`bayespig.library.film_models`) for the recipe's
 concentrations (appendix A2, :func:`bayespig.library.recipes.concentrations`), a film
 thickness (given, opaque, or unknown: then drawn from the thickness distribution of the
@@ -35,6 +36,7 @@ __all__ = [
     "DEFAULT_DRAWS",
     "DEFAULT_LEVEL",
     "PaintPrediction",
+    "joint_constants",
     "model_error_from_residuals",
     "predict_paint",
     "model_reflectance",
@@ -143,6 +145,54 @@ def _recipe(library, recipe):
     return recipe
 
 
+def joint_constants(library, pigments):
+    """The library's draws as joint draws for a recipe of ``pigments``: fixed pigments paired right.
+
+    A library is a staged (cut) posterior (:mod:`bayespig.library.build`): a pigment of a later
+    stage was fitted with the pigments of its films fitted before it *fixed* at one value each
+    (``library.provenance["conditioning"]``), so its draws are draws given those values. A
+    recipe that holds such a pigment and one it was conditioned on (directly or through another
+    pigment) is predicted with the latter at its fixed value in every draw; the other pigments
+    keep their own draws. Without this, the draws of a white (independent of the tinting
+    pigment's) would be mixed with a tinting pigment fitted relative to another white.
+
+    Parameters
+    ----------
+    library : PigmentLibrary
+    pigments : iterable of str
+        The pigments of the recipe (or those a match may use).
+
+    Returns
+    -------
+    numpy.ndarray
+        (n_draws, n_wl, n_pigments, 2), ``library.constants`` or a copy with the conditioning
+        pigments replaced. A library without ``"conditioning"`` in its provenance (written before
+        it was recorded) is returned unchanged.
+    """
+    info = (library.provenance or {}).get("conditioning") or {}
+    parents = info.get("conditioned_on") or {}
+    values = info.get("fixed_constants") or {}
+    pigments = [str(p) for p in pigments]
+    # every pigment a recipe pigment depends on, through any chain of stages
+    todo, ancestors = list(pigments), set()
+    while todo:
+        for parent in parents.get(todo.pop(), ()):
+            if parent not in ancestors:
+                ancestors.add(parent)
+                todo.append(parent)
+    replace = [p for p in sorted(ancestors) if p in set(pigments) and p in values and p in library.pigments]
+    if not replace:
+        return library.constants
+    constants = np.array(library.constants, dtype=float, copy=True)
+    for p in replace:
+        fixed = np.asarray(values[p], dtype=float)
+        if fixed.shape != constants.shape[1:2] + constants.shape[3:]:
+            raise ValueError(f"library: the fixed constants of {p!r} have shape {fixed.shape}, expected "
+                             f"{constants.shape[1:2] + constants.shape[3:]} (wavelengths, constants)")
+        constants[:, :, library.pigments.index(p)] = fixed
+    return constants
+
+
 def predict_reflectance(library, recipe, constants, thickness, *, instrument, substrate=None):
     """Model spectra of ``recipe`` for given constant draws (no model error).
 
@@ -230,8 +280,8 @@ def predict_paint(library, recipe, *, thickness, instrument, substrate=None, see
         if substrate.shape[-1:] != library.wavelength_nm.shape or not np.isfinite(substrate).all():
             raise ValueError(f"substrate must be finite card reflectances, one per library wavelength "
                              f"({library.wavelength_nm.size}), got shape {substrate.shape}")
-    R = predict_reflectance(library, recipe, library.constants[index], h, instrument=instrument,
-                            substrate=substrate)
+    draws = joint_constants(library, recipe.pigments)[index]
+    R = predict_reflectance(library, recipe, draws, h, instrument=instrument, substrate=substrate)
     use_error = bool(model_error) and library.model_error is not None
     if use_error:
         covariance = np.asarray(library.model_error, dtype=float)

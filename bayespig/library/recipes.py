@@ -43,7 +43,22 @@ holds 0.755 / 0.245 = 3.09 (= 5.65 / 1.83) times more blue per white than the ma
 Within one film ``D_i / D_j`` is still the mass ratio (``tint[0] / tint[1]`` is 1: with
 ``C_pp / mu = 1``, ``D`` counts mass per volume); the densities act through each film's volume,
 which is what a pigment's constants, learned from films of other recipes, see.
-(``reports/revigo.md`` suspects this mass-for-volume confusion as a cause of its tint misses.)
+
+Since the densities change every ``D_i`` of one film by one common factor (``1 / V``, the
+film's volume per unit mass of paint), they act exactly like a change of that film's thickness
+``h`` (``tau = h sum_i D_i sigma_i``; Kubelka-Munk's ``K X``, ``S X`` alike). For films of
+*unknown* thickness, each a free nuisance parameter (a library's films, a held-out film whose
+``h`` is fitted), they matter only through the prior on ``log h`` (sd 0.5, against factors of
+at most 1.4 between the Revigo films of one colour series, 2.1 between zinc white 07A and the
+grey 07F); they matter fully where thicknesses are measured
+or a prediction is asked at a given thickness. ``reports/revigo.md`` suspected the
+mass-for-volume confusion of its tint misses; measured, it is not their cause (issue 17): the
+leave-one-out library prediction of the vermilion 50/50 tint 06C gave ΔE00 0.99 / 0.95 (over
+black / white) with :data:`DEFAULT_DENSITIES` and 0.96 / 0.99 with equal densities, and the
+independent Kubelka-Munk baseline (``benchmarks/km_baseline.py --concentrations volume``) the
+same median on the 50/50 tints with volume as with mass fractions (2.60). So the defaults stay
+the pigments' densities, the physically right choice when the amounts are pigment masses, and
+harmless when they are paste masses of films of unknown thickness, as Revigo's are.
 
 The defaults
 ------------

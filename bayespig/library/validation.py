@@ -9,7 +9,9 @@ predicted. For each target film ``X`` (default: every film with two or more pigm
    films are fitted once (a base library, :func:`bayespig.build_library`'s ``base=``) and shared
    by every target that is not one of them;
 2. ``X`` is predicted from its recipe over each of its measured cards, its unknown thickness
-   the one free scalar (fitted to its spectra in relative deviation, median constants), and
+   the one free scalar (fitted to its spectra in relative deviation, median constants), with
+   the library's joint draws (:func:`bayespig.library.predict.joint_constants`: the base
+   pigments at the values the other pigments were fitted with), and
    also drawn from the library's own films (nothing of ``X`` used but its recipe and cards);
 3. the relative residuals ``measured / predicted - 1`` over all targets give the model-error
    covariance over wavelengths (:func:`bayespig.library.predict.model_error_from_residuals`);
@@ -34,7 +36,7 @@ from ..data import MeasurementSet
 from ..inference.settings import InferenceSettings
 from .build import _base_pigments, _portable as portable_fields, build_library
 from .match import match_paint
-from .predict import DEFAULT_LEVEL, model_error_from_residuals, predict_reflectance
+from .predict import DEFAULT_LEVEL, joint_constants, model_error_from_residuals, predict_reflectance
 from .recipes import film_recipes
 
 __all__ = [
@@ -168,11 +170,12 @@ def predict_held_out(library, measurements, recipe, *, model, film_id, seed=0, n
     """Predict one film the library has not seen (see the module docstring, step 2)."""
     started = time.perf_counter() if started is None else started
     instrument, pairs = card_spectra(measurements)
-    median = np.median(library.constants, axis=0)
+    joint = joint_constants(library, recipe.pigments)  # the fixed pigments at their fixed values
+    median = np.median(joint, axis=0)
     h = _fit_thickness(library, recipe, median, instrument, pairs)
     rng = np.random.default_rng(seed)
-    index = rng.choice(library.constants.shape[0], size=n_draws, replace=n_draws > library.constants.shape[0])
-    draws = library.constants[index]
+    index = rng.choice(joint.shape[0], size=n_draws, replace=n_draws > joint.shape[0])
+    draws = joint[index]
     mean, sd = library.thickness_prior
     h_unknown = np.exp(rng.normal(mean, sd, n_draws))
     wl = library.wavelength_nm

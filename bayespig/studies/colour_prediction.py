@@ -13,8 +13,10 @@ measured over its own black and white card on an 8°/d sphere.
    pigments) and the other films of ``X``'s series. Other series only add pigments ``X`` does
    not contain.
 3. **Prediction** of ``X`` over both of its measured cards from its recipe (appendix A2
-   concentrations with the library's densities). ``X``'s film thickness is unknown; two
-   variants:
+   concentrations with the library's densities), with the library's joint draws
+   (:func:`bayespig.library.predict.joint_constants`: the white and the black at the values
+   the tinting pigment was fitted with, not their own independent draws). ``X``'s film
+   thickness is unknown; two variants:
 
    * ``fitted`` (headline): the one free scalar, ``h``, fitted to ``X``'s two spectra by least
      squares in relative deviation with the median constants (everything else is predicted;

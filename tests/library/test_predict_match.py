@@ -12,7 +12,7 @@ import pytest
 from bayespig import colorimetry
 from bayespig.library.library import PigmentLibrary
 from bayespig.library.match import match_paint
-from bayespig.library.predict import model_error_from_residuals, predict_paint
+from bayespig.library.predict import joint_constants, model_error_from_residuals, predict_paint
 from bayespig.physics.forward import hemispherical_reflectance
 from bayespig.physics.substrate import substrate_albedo_from_air
 
@@ -57,6 +57,62 @@ def test_prediction_equals_the_direct_solver_with_the_mixed_constants():
     direct = hemispherical_reflectance(8.0, a=a_mix, tau=h * k, r_s=r_s, n=1.45, specular="excluded")
     np.testing.assert_allclose(prediction.reflectance_median, direct, rtol=TABLE_RTOL)
     assert prediction.delta_E_radius < 1e-6  # every draw the same constants, no model error
+
+
+def _staged_library(n_draws=64, seed=0):
+    """A library as a staged build leaves it: the white's own draws spread widely (its sigma only
+    bounded from below), the blue and the black fitted with the white fixed at the truth."""
+    library = _library(n_draws=n_draws)
+    rng = np.random.default_rng(seed)
+    c = library.constants.copy()
+    fixed_white = c[0, :, 0].copy()
+    c[:, :, 0, 1] += 2.0 * rng.standard_normal((n_draws, WL.size))  # sd 2.4 in the Revigo base
+    conditioning = {"conditioned_on": {"PrussianBlue": ["ZincWhite"], "BoneBlack": ["PrussianBlue"]},
+                    "fixed_constants": {"ZincWhite": fixed_white.tolist(),
+                                        "PrussianBlue": c[0, :, 1].tolist()}}
+    import dataclasses
+
+    return dataclasses.replace(library, constants=c, provenance={"conditioning": conditioning})
+
+
+def test_a_pigment_fitted_with_the_white_fixed_is_predicted_with_that_white():
+    library = _staged_library()
+    a, sigma = _truth()
+    fractions = np.array([0.5, 0.5, 0.0])
+    card = np.full(WL.size, 0.05)
+    prediction = predict_paint(library, {"ZincWhite": 1, "PrussianBlue": 1}, thickness=1.5, instrument="8d-sce",
+                               substrate=card, n_draws=8)
+    k = sigma @ fractions
+    r_s = substrate_albedo_from_air(card, n=1.45, kind="hemispherical", theta_i=8.0, specular="excluded")
+    direct = hemispherical_reflectance(8.0, a=(a * sigma) @ fractions / k, tau=1.5 * k, r_s=r_s, n=1.45,
+                                       specular="excluded")
+    np.testing.assert_allclose(prediction.reflectance_median, direct, rtol=TABLE_RTOL)
+    assert prediction.delta_E_radius < 1e-6  # the white's own spread is not in a tint's draws
+    # the white alone keeps its own posterior
+    alone = predict_paint(library, {"ZincWhite": 1}, thickness=1.5, instrument="8d-sce", substrate=card, n_draws=32)
+    assert alone.delta_E_radius > 0.1
+
+
+def test_joint_constants_follow_the_stages_through_every_pigment():
+    library = _staged_library()
+    fixed = library.provenance["conditioning"]["fixed_constants"]
+    # the black was fitted with the blue fixed, the blue with the white: a grey of white and black
+    # needs the white at its fixed value too; the black keeps its own draws
+    joint = joint_constants(library, ["ZincWhite", "BoneBlack"])
+    np.testing.assert_array_equal(joint[:, :, 0], np.broadcast_to(fixed["ZincWhite"], joint[:, :, 0].shape))
+    np.testing.assert_array_equal(joint[:, :, 2], library.constants[:, :, 2])
+    # a pigment no recipe pigment depends on keeps its draws; a library without the record is unchanged
+    assert joint_constants(library, ["ZincWhite"]) is library.constants
+    plain = _library()
+    assert joint_constants(plain, ["ZincWhite", "PrussianBlue"]) is plain.constants
+
+
+def test_the_conditioning_survives_save_and_load(tmp_path):
+    from bayespig.library.library import load_library
+
+    library = _staged_library()
+    back = load_library(library.save(tmp_path / "staged.nc"))
+    np.testing.assert_array_equal(joint_constants(back, PIGMENTS), joint_constants(library, PIGMENTS))
 
 
 def test_opaque_prediction_equals_the_direct_solver():
