@@ -360,3 +360,19 @@ def test_a_bad_substrate_sd_is_refused_as_infer_refuses_it(simulated, bad):
         bayespig.infer(sets["W"], substrate_sd=bad, progress=False)
     with pytest.raises(expected.type, match=re.escape(str(expected.value))):
         build_library({"W": sets["W"]}, substrate_sd=bad, progress=False)
+
+
+def test_the_build_records_what_each_later_stage_was_conditioned_on(library):
+    """Red and Blue were fitted with the base pigments of their films fixed: the record names them
+    (from the recipes of the films each was fitted from) and the values they were fixed at, which
+    must be one of the base pigments' own draws (the stage's representative draw); predictions
+    pair the draws by it (``bayespig.library.predict.joint_constants``)."""
+    conditioning = library.provenance["conditioning"]
+    films = {s["pigments"][0]: s["films"] for s in library.stages if s["stage"] == 2}
+    for pigment, names in films.items():
+        expected = sorted({p for name in names for p in RECIPES[name]} - {pigment})
+        assert sorted(conditioning["conditioned_on"][pigment]) == expected
+    for pigment in ("White", "Black"):
+        fixed = np.asarray(conditioning["fixed_constants"][pigment])
+        draws = library.constants[:, :, library.pigments.index(pigment)]
+        assert np.any(np.all(np.isclose(draws, fixed, rtol=0, atol=1e-12), axis=(1, 2)))
