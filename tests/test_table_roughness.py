@@ -22,17 +22,14 @@ from bayespig.rough_table import (
 
 pytestmark = pytest.mark.usefixtures("private_table_cache")
 
-#: Below this roughness the direct solver's body is smooth in alpha to better than 1e-5 between
-#: neighbouring table nodes, and the table meets the accuracy goal of every look-up table,
-#: ROUGH_TABLE_TOLERANCE (2e-4). Measured worst on 8 random points in [0.01, 0.1]: 1.6e-4.
+#: The table meets the accuracy goal of every look-up table, ROUGH_TABLE_TOLERANCE (2e-4), over
+#: its whole roughness range. Measured worst of the total on this test's 4 random points per
+#: range: 3.0e-5 in [0.01, 0.1], 1.1e-5 in [0.1, 1]; on 6 other points per range 3.0e-5 and
+#: 9.4e-5 (session 9; an earlier solver,
+#: before the fine rules' finest panel was capped at large alpha, was 1.6e-2 at alpha 0.8, and
+#: this test had a looser tolerance there). The two ranges are drawn apart so that both the
+#: glossy and the matt end are always tested.
 ACCURATE_ROUGHNESS_MAX = 0.1
-#: Above it the direct solver itself is not smooth in alpha: its body moves by 0.5-2 % between
-#: alpha nodes in steps that are not a smooth function (second differences of log f over
-#: log alpha of 1e-2 at alpha 0.3-1, the same with 32 instead of 16 quadrature points: the
-#: product-integration panels of bayespig.physics.rough_surface change layout with alpha), so
-#: no interpolant can follow it to 2e-4. Measured worst there: 1.6e-2 (alpha = 0.80); the
-#: tolerance leaves a margin of 2x.
-ROUGH_SOLVER_NOISE_TOLERANCE = 3e-2
 #: The analytic lobe of a BRDF channel is the physics module's own formula, to round-off.
 LOBE_TOLERANCE = 1e-12
 
@@ -59,13 +56,11 @@ def direct(a, alpha, part="total"):
     return np.array(values)
 
 
-@pytest.mark.parametrize("low, high, tolerance", [
-    (0.01, ACCURATE_ROUGHNESS_MAX, ROUGH_TABLE_TOLERANCE),
-    (ACCURATE_ROUGHNESS_MAX, 1.0, ROUGH_SOLVER_NOISE_TOLERANCE),
-])
-def test_table_equals_the_direct_solver_at_random_points(table, low, high, tolerance):
+@pytest.mark.parametrize("low, high", [(0.01, ACCURATE_ROUGHNESS_MAX), (ACCURATE_ROUGHNESS_MAX, 1.0)])
+def test_table_equals_the_direct_solver_at_random_points(table, low, high):
+    tolerance = ROUGH_TABLE_TOLERANCE
     rng = np.random.default_rng(16)
-    for _ in range(3):
+    for _ in range(4):
         a = float(rng.uniform(0.0, 1.0) ** 2)  # crowded towards a = 0 like the table's nodes
         alpha = float(np.exp(rng.uniform(np.log(low), np.log(high))))
         relative = np.abs(table(a=a, roughness=alpha) / direct(a, alpha) - 1.0)
