@@ -113,7 +113,7 @@ class CornellStudySettings:
     incidences_deg: tuple | None = None
     max_geometries: int | None = None
     inference: InferenceSettings = dataclasses.field(
-        default_factory=lambda: InferenceSettings(draws_per_chain=256, target_ess=400, max_steps=2000))
+        default_factory=lambda: InferenceSettings(draws_per_chain=256, target_ess=400, max_steps=8000))
     binder_index: str | None = "free"
     seed: int = 0
 
