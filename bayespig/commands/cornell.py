@@ -34,7 +34,8 @@ def add_cornell_parser(subparsers):
     parser.add_argument("--full-bands", type=float, nargs="*", default=None, metavar="NM",
                         help="bands of the full fit [nm] (default all 31)")
     parser.add_argument("--max-steps", type=int, default=None,
-                        help="cap of every run's steps per walker (default 8000: with the binder index free the subset fits need more than 2000)")
+                        help="cap of every run's steps per walker (default 8000: with the binder index free "
+                             "the subset fits need more than 2000)")
     parser.add_argument("--draws-per-chain", type=int, default=None,
                         help="stored draws per chain (default 256)")
     parser.add_argument("--fixed-binder-index", action="store_true",
