@@ -81,6 +81,18 @@ def _film(name, recipe, h, seed, table, white_factor=1.0):
     return dataclasses.replace(ms, metadata=metadata)
 
 
+def _assert_constants_covered(library):
+    """Every pigment's a and log sigma against their truth: the 90 % intervals hold them at the
+    nominal rate (at least the COVERAGE_QUANTILE quantile of the binomial count)."""
+    inside = []
+    for j, pigment in enumerate(library.pigments):
+        a, sigma = TRUTH[pigment]
+        for c, truth in enumerate((a, np.log(sigma))):
+            low, high = np.quantile(library.constants[:, :, j, c], [0.05, 0.95], axis=0)
+            inside.extend((low <= truth) & (truth <= high))
+    assert sum(inside) >= stats.binom(len(inside), COVERAGE).ppf(COVERAGE_QUANTILE), (sum(inside), len(inside))
+
+
 @pytest.fixture(scope="module")
 def simulated():
     table = load_table("8d-sce", progress=False)
@@ -150,14 +162,7 @@ def test_the_library_recovers_known_constants(library, simulated):
     _, _, truth_h = simulated
     assert isinstance(library, PigmentLibrary)
     assert library.constants.shape == (QUICK.n_ensembles * QUICK.draws_per_chain, WAVELENGTHS.size, 4, 2)
-    inside = []
-    for j, pigment in enumerate(library.pigments):
-        a, sigma = TRUTH[pigment]
-        for c, truth in enumerate((a, np.log(sigma))):
-            low, high = np.quantile(library.constants[:, :, j, c], [0.05, 0.95], axis=0)
-            inside.extend((low <= truth) & (truth <= high))
-    n = len(inside)
-    assert sum(inside) >= stats.binom(n, COVERAGE).ppf(COVERAGE_QUANTILE), (sum(inside), n)
+    _assert_constants_covered(library)
     for stage in library.stages:
         assert not stage["max_steps_reached"]
         assert stage["thickness_rhat_max"] <= 1.01 and stage["thickness_ess_min"] >= 400
@@ -293,13 +298,7 @@ def test_card_factors_recover_a_known_card_and_the_constants(carded):
             assert low <= truth <= high, (card, low, high)
             if truth != 1.0:
                 assert np.log(high / low) < 0.5 * 2 * 1.645 * CARD_SD, (low, high)
-    inside = []
-    for j, pigment in enumerate(library.pigments):
-        a, sigma = TRUTH[pigment]
-        for c, truth in enumerate((a, np.log(sigma))):
-            low, high = np.quantile(library.constants[:, :, j, c], [0.05, 0.95], axis=0)
-            inside.extend((low <= truth) & (truth <= high))
-    assert sum(inside) >= stats.binom(len(inside), COVERAGE).ppf(COVERAGE_QUANTILE), (sum(inside), len(inside))
+    _assert_constants_covered(library)
     for film in library.films:
         assert film["rms_log_deviation"] < 3 * EPS, film
         assert [c["card"] for c in film["card_factors"]] == [f"{film['id']}_ob_substrate", f"{film['id']}_ow_substrate"]
