@@ -774,6 +774,8 @@ def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, setting
             films[f] = {**films.get(f, {}), "stage": r["stage"], "used": True, "rms_log_deviation": r["rms_log_deviation"][j],
                         "thickness_median": float(np.median(h)),
                         "thickness_q05": float(np.quantile(h, 0.05)), "thickness_q95": float(np.quantile(h, 0.95))}
+            if concentration_factor is not None:
+                films[f].setdefault("concentration_factors", [])
             if card_factor is not None:
                 factors = []
                 for c, card in enumerate(r["cards"][j]):
