@@ -432,10 +432,17 @@ def test_concentration_factors_recover_a_shade_whose_black_is_off(concentrated):
 
 
 def test_concentration_factors_are_saved(concentrated, tmp_path):
-    """concentration_factor over (chain, draw, film, component) in the file, read back whole."""
+    """concentration_factor over (chain, draw, film, component) in the file, read back whole; the
+    pigment report's film table names each factor."""
     back = load_library(concentrated.save(tmp_path / "library.nc"))
     np.testing.assert_array_equal(back.concentration_factor, concentrated.concentration_factor)
     assert back.concentration_names == concentrated.concentration_names
+    from bayespig.report.pigment import pigment_report
+
+    text = pigment_report(concentrated, "Red")["Red.md"]
+    factor = next(f for f in concentrated.films if f["id"] == "RB")["concentration_factors"][0]
+    assert f"Black {factor['median']:.3f} [{factor['q05']:.3f}, {factor['q95']:.3f}]" in text
+    assert "concentration_sd 0.3" in text
 
 
 @pytest.mark.parametrize("model", ["radiative-transfer", "kubelka-munk"])
