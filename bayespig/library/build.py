@@ -34,6 +34,22 @@ but 06D's white card went to the truncation of its prior (``f = 0.61``, thicknes
 both film models): the factor absorbed a misfit of that film (its record marks it
 ``implausible``, :data:`IMPLAUSIBLE_SDS`).
 
+The recipes' uncertainty (``concentration_sd=``): a factor ``f`` on the effective concentration
+of each film's minor pigments fixed from an earlier stage, ``D_eff = f D``, ``log f ~ N(0,
+concentration_sd^2)`` (:func:`concentration_factor_spec`, the spec
+:class:`~bayespig.inference.concentration_factors.ConcentrationFactors`), sampled in the same
+joint run; it enters through the film models' log-linear coordinates
+(:attr:`~bayespig.library.film_models.FilmModel.log_linear`; the mixing rules are linear in
+``D``). Revigo, on the base library of 07A, 07C-07F (leave-one-out settings), ΔE00 over black /
+white without -> with ``concentration_sd=0.3``: 12C from 12A, 12B, 12D 2.39 / 5.80 -> 1.18 /
+1.80 (Kubelka-Munk 1.28 / 6.06 -> 1.06 / 1.85), 12D's black going to the prior's truncation
+(``f = 3.32``; with sd 1.0 to ``f = 9.3``, 12C 1.54 / 1.42): a black acting ~9 x its recipe's
+amount in cobalt blue is no weighing error but a bone black that the zinc-white greys do not
+describe in this mixture. 14B from 14A, 14C-14E 4.97 / 5.06 -> 5.56 / 5.72 (Kubelka-Munk 5.44
+/ 5.46 -> 6.04 / 6.09): 14D's and 14E's black go to ``f`` 0.30 / 0.45 (sd 1.0: 0.12 / 0.31)
+and 14A stays at 20 % rms, since no positive amount of black makes chrome yellow lighter, as
+14D and 14E are below 500 nm.
+
 Stages: a cut (modular) posterior
 ---------------------------------
 One joint posterior over a whole palette (Revigo: 20 pigments x 2 constants x 31 bands plus 84
