@@ -128,6 +128,9 @@ def add_library_parsers(subparsers):
     build.add_argument("--films", default=None, help="only these films (comma-separated ids)")
     build.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     add_substrate_argument(build)  # as 'bayespig infer --substrate-sd': one factor per card and film
+    build.add_argument("--concentration-sd", type=float, default=None, metavar="SD",
+                       help="the recipes' uncertainty: a factor on the concentration of each film's minor pigments "
+                       "fixed from an earlier stage, log f ~ N(0, SD^2) (e.g. 0.3; default: the recipes as given)")
     add_verbosity_arguments(build)
     build.set_defaults(func=run_library_build)
 
@@ -203,9 +206,11 @@ def _say(args):
 def run_library_build(args):
     from ..data.spectral_table import read_revigo
     from ..inference.arguments import check_substrate_sd
+    from ..inference.concentration_factors import check_concentration_sd
     from ..library import build_library
 
     substrate_sd = check_substrate_sd(args.substrate_sd)  # before any file is read: infer's message
+    concentration_sd = check_concentration_sd(args.concentration_sd)
     path = Path(args.measurements)
     sets = read_revigo(path) if path.is_dir() else path
     if args.films and isinstance(sets, dict):
@@ -215,11 +220,12 @@ def run_library_build(args):
             raise ValueError(f"--films: {missing[0]!r} is not a film of {path}")
         sets = {f: sets[f] for f in wanted}
     library = build_library(sets, model=args.model, seed=args.seed, progress=_say(args) or False,
-                            substrate_sd=substrate_sd)
+                            substrate_sd=substrate_sd, concentration_sd=concentration_sd)
     library.save(args.out)
     print(f"wrote {args.out}: {len(library.pigments)} pigments ({', '.join(library.pigments)}), "
           f"{library.wavelength_nm.size} wavelengths, model {library.model}"
-          + ("" if substrate_sd is None else f", card factors (prior sd {substrate_sd:g} in log f)"))
+          + ("" if substrate_sd is None else f", card factors (prior sd {substrate_sd:g} in log f)")
+          + ("" if concentration_sd is None else f", concentration factors (prior sd {concentration_sd:g} in log f)"))
     return 0
 
 

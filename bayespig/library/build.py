@@ -34,6 +34,22 @@ but 06D's white card went to the truncation of its prior (``f = 0.61``, thicknes
 both film models): the factor absorbed a misfit of that film (its record marks it
 ``implausible``, :data:`IMPLAUSIBLE_SDS`).
 
+The recipes' uncertainty (``concentration_sd=``): a factor ``f`` on the effective concentration
+of each film's minor pigments fixed from an earlier stage, ``D_eff = f D``, ``log f ~ N(0,
+concentration_sd^2)`` (:func:`concentration_factor_spec`, the spec
+:class:`~bayespig.inference.concentration_factors.ConcentrationFactors`), sampled in the same
+joint run; it enters through the film models' log-linear coordinates
+(:attr:`~bayespig.library.film_models.FilmModel.log_linear`; the mixing rules are linear in
+``D``). Revigo, on the base library of 07A, 07C-07F (leave-one-out settings), ΔE00 over black /
+white without -> with ``concentration_sd=0.3``: 12C from 12A, 12B, 12D 2.39 / 5.80 -> 1.18 /
+1.80 (Kubelka-Munk 1.28 / 6.06 -> 1.06 / 1.85), 12D's black going to the prior's truncation
+(``f = 3.32``; with sd 1.0 to ``f = 9.3``, 12C 1.54 / 1.42): a black acting ~9 x its recipe's
+amount in cobalt blue is no weighing error but a bone black that the zinc-white greys do not
+describe in this mixture. 14B from 14A, 14C-14E 4.97 / 5.06 -> 5.56 / 5.72 (Kubelka-Munk 5.44
+/ 5.46 -> 6.04 / 6.09): 14D's and 14E's black go to ``f`` 0.30 / 0.45 (sd 1.0: 0.12 / 0.31)
+and 14A stays at 20 % rms, since no positive amount of black makes chrome yellow lighter, as
+14D and 14E are below 500 nm.
+
 Stages: a cut (modular) posterior
 ---------------------------------
 One joint posterior over a whole palette (Revigo: 20 pigments x 2 constants x 31 bands plus 84
@@ -102,6 +118,8 @@ from scipy import optimize, sparse
 from .._pool import executor_or_local_pool
 from ..inference.arguments import check_flag, check_substrate_sd
 from ..inference.card_factors import FACTOR_PRIOR_SDS, CardFactors, card_indices
+from ..inference.concentration_factors import (CONCENTRATION_PRIOR_SDS, ConcentrationFactors,
+                                               check_concentration_sd)
 from ..inference.film_thickness import FilmThickness
 from ..inference.settings import InferenceSettings
 from ..inference.shared import BlockLayout, sample_blocks
@@ -182,6 +200,8 @@ class LibraryLayout(BlockLayout):
         self.observed = np.concatenate([p.observed for p in self.predictors], axis=1)
         self.eps = np.concatenate([np.where(np.isfinite(p.eps), p.eps, eps) * np.ones(p.observed.shape[1])
                                    for p in self.predictors])
+        #: (film index, pigment column) of each concentration factor (set by the spec's builder)
+        self.factor_index = ()
         self.value_slices, self.scale_slices = [], []
         start = scale_start = 0
         for p in self.predictors:
@@ -197,12 +217,28 @@ class LibraryLayout(BlockLayout):
         fixed = np.broadcast_to(self.fixed, (W,) + self.fixed.shape)
         return np.concatenate([fitted, fixed], axis=2)
 
+    def film_constants(self, constants, f, log_factor):
+        """Film ``f``'s constants with its minor pigments' concentration factors applied.
+
+        ``D_i -> f_i D_i`` is ``+ log f_i`` on the coordinates the mixing rule weights by the
+        concentration (:attr:`~bayespig.library.film_models.FilmModel.log_linear`).
+        """
+        columns = [(k, j) for k, (film, j) in enumerate(self.factor_index) if film == f]
+        if log_factor is None or not columns:
+            return constants
+        shift = np.zeros((constants.shape[0], 1) + constants.shape[2:])
+        mask = np.asarray(self.film_model.log_linear, dtype=float)
+        for k, j in columns:
+            shift[:, 0, j, :] = log_factor[:, k, None] * mask
+        return constants + shift
+
     def predict(self, theta, inputs):
         """Values of every film, concatenated, (W, n_wl, n_values)."""
         constants = self.constants(theta)
         thickness = inputs["thickness"]
         scale = inputs.get("r_s_scale")
-        return np.concatenate([p.values(constants, c, thickness[:, f],
+        log_factor = inputs.get("concentration_log_factor")
+        return np.concatenate([p.values(self.film_constants(constants, f, log_factor), c, thickness[:, f],
                                         r_s_scale=None if scale is None else scale[:, self.scale_slices[f]])
                                for f, (p, c) in enumerate(zip(self.predictors, self.concentrations))], axis=2)
 
@@ -259,6 +295,47 @@ def card_factor_spec(films, sets, predictors, substrate_sd):
     if not labels:
         return None, tuple(per_film)
     return CardFactors.over_cards(index, r_s_max, substrate_sd, labels), tuple(per_film)
+
+
+def concentration_factor_spec(films, film_concentrations, pigments, concentration_sd, n_fitted=0):
+    """The concentration factors of a stage group's films: one per minor *fixed* pigment of each film.
+
+    A film's minor pigments are those of nonzero concentration other than its dominant one
+    (largest ``D``, the first on a tie; a factor on every pigment would be the film's
+    thickness); a film of one pigment gets none
+    (:mod:`bayespig.inference.concentration_factors`). Only the pigments fixed from earlier
+    stages get one (the black of a shade, the white of a tint where the colour dominates), not
+    those being fitted: a factor on the fitted pigment of a tint frees the tint from its
+    masstone, which is what the tint is to inform (Revigo 12B's cobalt blue went to ``f = 3.0``
+    with one, and 12C was then predicted at ΔE00 6.56 / 7.40 against 2.39 / 5.80 without
+    factors).
+
+    Parameters
+    ----------
+    films : sequence of str
+    film_concentrations : numpy.ndarray
+        ``D`` of every film over ``pigments``, (n_films, n_pigments).
+    pigments : sequence of str
+        The layout's pigment order (fitted then fixed).
+    concentration_sd : float
+        Prior sd of ``log f`` [-].
+    n_fitted : int
+        The first ``n_fitted`` of ``pigments`` are being fitted (no factor).
+
+    Returns
+    -------
+    tuple
+        ``(spec, index)``: the :class:`~bayespig.inference.concentration_factors.ConcentrationFactors`
+        (None when no film has a minor pigment) and its ``(film index, pigment column)`` pairs.
+    """
+    index = []
+    for f, D in enumerate(np.asarray(film_concentrations, dtype=float)):
+        dominant = int(np.argmax(D))
+        index += [(f, j) for j in np.flatnonzero(D > 0) if j != dominant and j >= n_fitted]
+    if not index:
+        return None, ()
+    spec = ConcentrationFactors([films[f] for f, _ in index], [pigments[j] for _, j in index], concentration_sd)
+    return spec, tuple((int(f), int(j)) for f, j in index)
 
 
 def representative_draw(constants):
@@ -415,6 +492,13 @@ def _fit_group(task):
         card_spec, film_cards = card_factor_spec(task["films"], sets, predictors, task["substrate_sd"])
         if card_spec is not None:
             specs.append(card_spec)
+    concentration_spec = None
+    if task.get("concentration_sd") is not None:
+        order = tuple(task["pigments"]) + tuple(task.get("fixed_pigments", ()))
+        concentration_spec, layout.factor_index = concentration_factor_spec(
+            task["films"], task["concentrations"], order, task["concentration_sd"], n_fitted=len(task["pigments"]))
+        if concentration_spec is not None:
+            specs.append(concentration_spec)
     start_seq, joint_seq, ball_seq = np.random.SeedSequence(task["seed"], spawn_key=task["spawn_key"]).spawn(3)
     centre = _least_squares_start(layout, np.exp(spec.nominal))
     rng = np.random.default_rng(ball_seq)
@@ -441,15 +525,23 @@ def _fit_group(task):
     rhat_c = np.array([float(az.rhat(constant_chains[..., j])) for j in range(constant_chains.shape[-1])])
     ess_c = np.array([float(az.ess(constant_chains[..., j])) for j in range(constant_chains.shape[-1])])
     card_diagnostics = {}
-    if card_spec is not None:
-        factor_chains = factors[0].reshape(n_chains, n_draws, -1)
-        rhat_f = [float(az.rhat(factor_chains[..., j])) for j in range(card_spec.size)]
-        ess_f = [float(az.ess(factor_chains[..., j])) for j in range(card_spec.size)]
-        card_diagnostics = {"card_factor_rhat_max": max(rhat_f), "card_factor_ess_min": min(ess_f)}
+    card_draws = factors.pop(0) if card_spec is not None else None
+    concentration_draws = factors.pop(0) if concentration_spec is not None else None
+    for name, spec_k, draws_k in (("card_factor", card_spec, card_draws),
+                                  ("concentration_factor", concentration_spec, concentration_draws)):
+        if spec_k is None:
+            continue
+        factor_chains = draws_k.reshape(n_chains, n_draws, -1)
+        rhat_f = [float(az.rhat(factor_chains[..., j])) for j in range(spec_k.size)]
+        ess_f = [float(az.ess(factor_chains[..., j])) for j in range(spec_k.size)]
+        card_diagnostics.update({f"{name}_rhat_max": max(rhat_f), f"{name}_ess_min": min(ess_f)})
     return {
         "pigments": task["pigments"], "films": task["films"], "stage": task["stage"],
         "constants": constants, "thickness": thickness, "rms_log_deviation": rms,
-        "cards": film_cards, "card_factors": factors[0] if card_spec is not None else None,
+        "cards": film_cards, "card_factors": card_draws,
+        "concentration_labels": () if concentration_spec is None else tuple(
+            zip(concentration_spec.films, concentration_spec.pigments)),
+        "concentration_factors": concentration_draws,
         "diagnostics": {
             "stage": task["stage"], "pigments": list(task["pigments"]), "films": list(task["films"]),
             "n_steps": int(run["n_steps"]), "max_steps_reached": bool(run["max_steps_reached"]),
@@ -488,7 +580,7 @@ def _versions():
 
 def build_library(measurements, *, model="radiative-transfer", seed=0, executor=None, progress=True,
                   densities=None, eps=0.02, base_pigments=None, thickness=None, settings=None, base=None,
-                  substrate_sd=None):
+                  substrate_sd=None, concentration_sd=None):
     """A pigment library from films of known recipes (see the module docstring for the stages).
 
     Parameters
@@ -530,6 +622,20 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
         (:attr:`PigmentLibrary.card_factor` over ``(draw, film, card)``). Default None, as
         ``infer``'s: the cards as converted from their measurement (the draws are exactly
         those of a build without the argument).
+    concentration_sd : float, optional
+        The recipes' uncertainty: every film's minor pigments fixed from an earlier stage (not
+        its dominant one, whose factor would be the film's thickness, nor the pigment being
+        fitted, see :func:`concentration_factor_spec`) act at an effective concentration ``D_eff = f D``,
+        ``log f ~ N(0, concentration_sd^2)`` (e.g. 0.3), one per (film, pigment), sampled in
+        each stage's joint run with the thicknesses (:func:`concentration_factor_spec`,
+        :mod:`bayespig.inference.concentration_factors`). Physically weighing and dispersion
+        errors of a small amount and tinting-strength differences of a pigment in a given
+        mixture (flocculation): e.g. a bone black fixed from zinc-white greys that darkens a
+        chrome yellow less than its recipe share says. The library then holds their draws
+        (:attr:`PigmentLibrary.concentration_factor` over ``(draw, film, component)``, names in
+        :attr:`PigmentLibrary.concentration_names`) and each film's record their summary
+        (``concentration_factors``). Default None: the recipes' concentrations (the draws are
+        exactly those of a build without the argument).
 
     Returns
     -------
@@ -541,6 +647,7 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
     if not (np.isfinite(eps) and eps > 0):
         raise ValueError(f"eps must be a positive number, got {eps!r}")
     substrate_sd = check_substrate_sd(substrate_sd)
+    concentration_sd = check_concentration_sd(concentration_sd)
     film_model = _film_model(model)
     settings = DEFAULT_SETTINGS if settings is None else settings
     sets = _read_measurements(measurements)
@@ -594,7 +701,8 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
                 "fixed_constants": (np.stack([medians[p] for p in fixed], axis=1) if fixed else None),
                 "measured": np.array([thickness.get(f, np.nan) for f in films], dtype=float),
                 "eps": float(eps), "settings": settings, "seed": int(seed), "spawn_key": (s, g),
-                "substrate_sd": substrate_sd,
+                "substrate_sd": substrate_sd, "fixed_pigments": tuple(fixed),
+                "concentration_sd": concentration_sd,
             })
         stage_start = time.perf_counter()
         def report(result):
@@ -606,6 +714,8 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
                       f"thickness ESS >= {d['thickness_ess_min']:.0f}"
                       + (f", card factors R-hat <= {d['card_factor_rhat_max']:.3f}, ESS >= "
                          f"{d['card_factor_ess_min']:.0f}" if "card_factor_rhat_max" in d else "")
+                      + (f", concentration factors R-hat <= {d['concentration_factor_rhat_max']:.3f}, ESS >= "
+                         f"{d['concentration_factor_ess_min']:.0f}" if "concentration_factor_rhat_max" in d else "")
                       + f", {d['seconds']:.1f} s",
                       file=sys.stderr, flush=True)
             return result
@@ -627,14 +737,15 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
                   file=sys.stderr, flush=True)
         results.extend(done)
     library = _assemble(film_model, results, recipes, unused, wavelengths[0], seed, settings, eps, densities,
-                        base_pigments, model, stages, time.perf_counter() - start, base, substrate_sd)
+                        base_pigments, model, stages, time.perf_counter() - start, base, substrate_sd,
+                        concentration_sd)
     conditioning = {"conditioned_on": conditioned_on,
                     "fixed_constants": {p: np.asarray(v, dtype=float).tolist() for p, v in fixed_constants.items()}}
     return dataclasses.replace(library, provenance={**library.provenance, "conditioning": conditioning})
 
 
 def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, settings, eps, densities,
-              base_pigments, model, stages, seconds, base=None, substrate_sd=None):
+              base_pigments, model, stages, seconds, base=None, substrate_sd=None, concentration_sd=None):
     """The library from the stage groups' results (and a base library's pigments first)."""
     parts = [r["constants"] for r in results] + ([] if base is None else [base.constants])
     if not parts:
@@ -650,14 +761,37 @@ def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, setting
         n_cards = max([len(c) for r in results for c in r["cards"]] + [1])
         card_factor = np.full((n_draws, len(film_ids), n_cards), np.nan)
         card_names = [[""] * n_cards for _ in film_ids]
+    concentration_factor = concentration_names = None
+    if concentration_sd is not None:
+        per_film = {}
+        for r in results:
+            for film, pigment in r["concentration_labels"]:
+                per_film.setdefault(film, []).append(pigment)
+        n_components = max([len(v) for v in per_film.values()] + [1])
+        concentration_factor = np.full((n_draws, len(film_ids), n_components), np.nan)
+        concentration_names = [[""] * n_components for _ in film_ids]
     for r in results:
+        if concentration_factor is not None:
+            slots = {}
+            for k, (film, pigment) in enumerate(r["concentration_labels"]):
+                i = film_ids.index(film)
+                c = slots.setdefault(film, 0)
+                slots[film] += 1
+                values = r["concentration_factors"][:n_draws, k]
+                concentration_factor[:, i, c] = values
+                concentration_names[i][c] = pigment
+                q05, q95 = np.quantile(values, [0.05, 0.95])
+                films.setdefault(film, {}).setdefault("concentration_factors", []).append(
+                    {"pigment": pigment, "median": float(np.median(values)), "q05": float(q05), "q95": float(q95)})
         column = 0
         for j, f in enumerate(r["films"]):
             h = r["thickness"][:n_draws, j]
             thickness[:, film_ids.index(f)] = h
-            films[f] = {"stage": r["stage"], "used": True, "rms_log_deviation": r["rms_log_deviation"][j],
+            films[f] = {**films.get(f, {}), "stage": r["stage"], "used": True, "rms_log_deviation": r["rms_log_deviation"][j],
                         "thickness_median": float(np.median(h)),
                         "thickness_q05": float(np.quantile(h, 0.05)), "thickness_q95": float(np.quantile(h, 0.95))}
+            if concentration_factor is not None:
+                films[f].setdefault("concentration_factors", [])
             if card_factor is not None:
                 factors = []
                 for c, card in enumerate(r["cards"][j]):
@@ -680,6 +814,8 @@ def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, setting
                         "thickness_median": None, "thickness_q05": None, "thickness_q95": None}
         if card_factor is not None:
             unused_entry["card_factors"] = []
+        if concentration_factor is not None:
+            unused_entry["concentration_factors"] = []
         entry.update(films.get(f, unused_entry))
         records.append(entry)
     base_medians = [] if base is None else [f["thickness_median"] for f in base.films
@@ -701,10 +837,18 @@ def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, setting
         provenance["card_factor_prior"] = (f"r_s = f r_s,card per card and film at every wavelength, log f ~ "
                                            f"N(0, {substrate_sd:g}^2), truncated at {FACTOR_PRIOR_SDS:g} sd and at "
                                            "r_s f <= 1 (bayespig.inference.card_factors)")
+    if concentration_sd is not None:  # absent otherwise: a build without factors is recorded as before
+        provenance["concentration_sd"] = float(concentration_sd)
+        provenance["concentration_factor_prior"] = (
+            f"D_eff = f D for every minor pigment of a film (the dominant one at f = 1), log f ~ "
+            f"N(0, {concentration_sd:g}^2), truncated at {CONCENTRATION_PRIOR_SDS:g} sd "
+            "(bayespig.inference.concentration_factors)")
     return PigmentLibrary(
         model=model, pigments=pigments, wavelength_nm=np.asarray(wavelength_nm, dtype=float),
         constants=constants, constant_names=tuple(film_model.constant_names), thickness_prior=thickness_prior,
         films=tuple(records), film_ids=film_ids, thickness=thickness,
         densities=None if densities is None else dict(densities), model_error=None, provenance=provenance,
         stages=tuple(r["diagnostics"] for r in results) + (() if base is None else tuple(base.stages)),
-        card_factor=card_factor, card_names=None if card_names is None else tuple(map(tuple, card_names)))
+        card_factor=card_factor, card_names=None if card_names is None else tuple(map(tuple, card_names)),
+        concentration_factor=concentration_factor,
+        concentration_names=None if concentration_names is None else tuple(map(tuple, concentration_names)))

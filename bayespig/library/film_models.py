@@ -238,10 +238,15 @@ class FilmModel(abc.ABC):
         The two sampled coordinates per pigment and wavelength.
     lower, upper : numpy.ndarray
         Shape (2,): the box of the sampled coordinates (a flat prior on it is the library's).
+    log_linear : tuple of float
+        Per sampled coordinate 1 where it is the log of a coefficient the mixing rule weights by
+        the concentration (so ``D -> f D`` is ``+ log f`` there), else 0: the library's
+        concentration factors (:mod:`bayespig.inference.concentration_factors`).
     """
 
     name = ""
     constant_names = ()
+    log_linear = (0.0, 0.0)
 
     def __init__(self, lower, upper):
         lower = real_array("lower", lower)
@@ -310,6 +315,7 @@ class RadiativeTransferModel(FilmModel):
 
     name = "radiative-transfer"
     constant_names = ("a", "log_sigma")
+    log_linear = (0.0, 1.0)  # k_ext = sum D_i sigma_i, a of the mixture weighted by D_i sigma_i (section 2)
 
     def __init__(self, lower=(0.0, LOG_SIGMA_RANGE[0]), upper=(1.0, LOG_SIGMA_RANGE[1]), tables=None):
         super().__init__(lower, upper)
@@ -456,6 +462,7 @@ class KubelkaMunkModel(FilmModel):
 
     name = "kubelka-munk"
     constant_names = ("log_K", "log_S")
+    log_linear = (1.0, 1.0)  # Duncan: K = sum D_i K_i, S = sum D_i S_i
 
     def __init__(self, lower=(LOG_K_RANGE[0], LOG_S_RANGE[0]), upper=(LOG_K_RANGE[1], LOG_S_RANGE[1]),
                  k1=None, k2=None):

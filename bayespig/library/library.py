@@ -76,6 +76,12 @@ class PigmentLibrary:
     card_names : tuple of tuple of str or None
         Per film (the order of :attr:`film_ids`) the names of its cards along ``card`` (``""``
         where it has fewer).
+    concentration_factor : numpy.ndarray or None
+        Draws of the factor ``f`` on each film's minor pigments' concentrations, ``D_eff = f D``
+        [-], (n_draws, n_films, n_components) (NaN where a film has fewer); None for a library
+        built without them (``build_library(..., concentration_sd=...)``).
+    concentration_names : tuple of tuple of str or None
+        Per film the pigment of each ``component`` (``""`` where it has fewer).
     """
 
     model: str
@@ -93,6 +99,8 @@ class PigmentLibrary:
     stages: tuple
     card_factor: np.ndarray | None = None
     card_names: tuple | None = None
+    concentration_factor: np.ndarray | None = None
+    concentration_names: tuple | None = None
 
     def __repr__(self):
         return (f"PigmentLibrary({self.model!r}, {len(self.pigments)} pigments, {len(self.film_ids)} films, "
@@ -120,6 +128,11 @@ class PigmentLibrary:
             data["card_factor"] = (("chain", "draw", "film", "card"), np.asarray(self.card_factor, dtype=float)[None])
             coords["card"] = np.arange(self.card_factor.shape[2])
             attrs["card_names"] = json.dumps([list(names) for names in self.card_names])
+        if self.concentration_factor is not None:
+            data["concentration_factor"] = (("chain", "draw", "film", "component"),
+                                            np.asarray(self.concentration_factor, dtype=float)[None])
+            coords["component"] = np.arange(self.concentration_factor.shape[2])
+            attrs["concentration_names"] = json.dumps([list(names) for names in self.concentration_names])
         if self.model_error is not None:
             error = np.asarray(self.model_error, dtype=float)
             if error.ndim == 2:  # a covariance over wavelengths
@@ -172,6 +185,10 @@ def load_library(path):
                    else None)
     card_names = (tuple(tuple(str(c) for c in names) for names in json.loads(attrs["card_names"]))
                   if card_factor is not None else None)
+    concentration_factor = (np.asarray(posterior["concentration_factor"].values[0], dtype=float)
+                            if "concentration_factor" in posterior else None)
+    concentration_names = (tuple(tuple(str(c) for c in names) for names in json.loads(attrs["concentration_names"]))
+                           if concentration_factor is not None else None)
     return PigmentLibrary(
         model=str(attrs["model"]), pigments=tuple(str(p) for p in posterior["pigment"].values),
         wavelength_nm=np.asarray(posterior["wavelength"].values, dtype=float),
@@ -182,4 +199,5 @@ def load_library(path):
         thickness=np.asarray(posterior["film_thickness"].values[0], dtype=float),
         densities=json.loads(attrs["densities"]), model_error=model_error,
         provenance=json.loads(attrs["provenance"]), stages=tuple(json.loads(attrs["stages"])),
-        card_factor=card_factor, card_names=card_names)
+        card_factor=card_factor, card_names=card_names,
+        concentration_factor=concentration_factor, concentration_names=concentration_names)

@@ -121,9 +121,12 @@ def pigment_report(library, pigment):
               "## The films it came from", ""]
     if films:
         cards = any("card_factors" in f for f in films)
+        conc = any("concentration_factors" in f for f in films)
         lines += ["| film | recipe (mass fractions) | stage | thickness h, median [90 %] | "
                   + ("card factors f = r_s / r_s,card, median [90 %] | " if cards else "")
-                  + "rms log(measured/predicted) |", "|---|---|---|---|" + ("---|" if cards else "") + "---|"]
+                  + ("concentration factors f = D_eff / D, median [90 %] | " if conc else "")
+                  + "rms log(measured/predicted) |",
+                  "|---|---|---|---|" + ("---|" if cards else "") + ("---|" if conc else "") + "---|"]
         for f in films:
             recipe = ", ".join(f"{p} {w:.3g}" for p, w in f.get("recipe", {}).items())
             h = (f"{f['thickness_median']:.3g} [{f['thickness_q05']:.3g}, {f['thickness_q95']:.3g}]"
@@ -132,8 +135,11 @@ def pigment_report(library, pigment):
             factors = ("; ".join(f"{c['card']} {c['median']:.3f} [{c['q05']:.3f}, {c['q95']:.3f}]"
                                  + (" (beyond 3 prior sd: absorbs a misfit?)" if c.get("implausible") else "")
                                  for c in f.get("card_factors") or ()) or "—") if cards else None
+            concentration = ("; ".join(f"{c['pigment']} {c['median']:.3f} [{c['q05']:.3f}, {c['q95']:.3f}]"
+                                       for c in f.get("concentration_factors") or ()) or "—") if conc else None
             lines.append(f"| {f['id']} | {recipe} | {f.get('stage', '')} | {h} | "
                          + (f"{factors} | " if cards else "")
+                         + (f"{concentration} | " if conc else "")
                          + f"{'—' if rms is None else format(rms, '.3g')} |")
     else:
         lines.append("No film of the library contains it.")
@@ -148,7 +154,7 @@ def _column(label):
 
 def _provenance(library):
     p = library.provenance or {}
-    items = [f"{key} {p[key]}" for key in ("seed", "eps", "substrate_sd") if key in p]
+    items = [f"{key} {p[key]}" for key in ("seed", "eps", "substrate_sd", "concentration_sd") if key in p]
     versions = p.get("versions")
     if isinstance(versions, dict):
         items.append("versions " + ", ".join(f"{k} {v}" for k, v in versions.items()))

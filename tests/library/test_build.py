@@ -54,12 +54,13 @@ QUICK = InferenceSettings(target_ess=400.0, draws_per_chain=256, max_steps=20000
 COVERAGE, COVERAGE_QUANTILE = 0.9, 0.001
 
 
-def _film(name, recipe, h, seed, table, white_factor=1.0):
+def _film(name, recipe, h, seed, table, white_factor=1.0, stated=None):
     """A film over a black (albedo 0.05) and a white card (0.85), both cards measured.
 
     ``white_factor``: the film lies on ``r_s = white_factor * 0.85`` while its white card's
     measurement is that of the 0.85 card (the same noise draws: one seed), i.e. the true card
-    factor of :mod:`bayespig.inference.card_factors` is ``white_factor``.
+    factor of :mod:`bayespig.inference.card_factors` is ``white_factor``. ``stated``: the recipe
+    the film's metadata gives (default ``recipe``, the one it is simulated with).
     """
     weight = {p: f * TRUTH[p][1] for p, f in recipe.items()}
     total = sum(weight.values())
@@ -76,8 +77,9 @@ def _film(name, recipe, h, seed, table, white_factor=1.0):
         card = f"{name}_ow_substrate"
         ms = dataclasses.replace(ms, samples=tuple(ms.sample(card) if s.name == card else s
                                                    for s in measured(0.85 * white_factor).samples))
-    pigments = sorted(recipe)
-    metadata = dict(ms.metadata, composition={"pigments": pigments, "mass_ratios": [recipe[p] for p in pigments]})
+    stated = recipe if stated is None else stated
+    pigments = sorted(stated)
+    metadata = dict(ms.metadata, composition={"pigments": pigments, "mass_ratios": [stated[p] for p in pigments]})
     return dataclasses.replace(ms, metadata=metadata)
 
 
@@ -375,3 +377,91 @@ def test_the_build_records_what_each_later_stage_was_conditioned_on(library):
         fixed = np.asarray(conditioning["fixed_constants"][pigment])
         draws = library.constants[:, :, library.pigments.index(pigment)]
         assert np.any(np.all(np.isclose(draws, fixed, rtol=0, atol=1e-12), axis=(1, 2)))
+
+
+#: True factor on the black of the shade RB: it acts as 0.14 of black where its recipe says 0.1.
+CONCENTRATION_FACTOR = 1.4
+CONCENTRATION_SD = 0.3
+RED_FILMS = ("R", "RW1", "RW2", "RB")
+
+
+@pytest.fixture(scope="module")
+def concentrated(simulated):
+    """Red's films on a base library of the white and black, the shade RB's black 1.4 x its recipe's,
+    built with concentration factors."""
+    sets, measured, truth_h = simulated
+    table = load_table("8d-sce", progress=False)
+    seeds = {name: 100 + k for k, name in enumerate(RECIPES)}
+    base = build_library({f: sets[f] for f in BASE_FILMS}, seed=3, progress=False, eps=EPS, settings=QUICK,
+                         thickness={f: measured[f] for f in BASE_FILMS}, densities=DENSITIES)
+    red = {f: sets[f] for f in RED_FILMS}
+    red["RB"] = _film("RB", {"Red": 0.9, "Black": 0.1 * CONCENTRATION_FACTOR}, truth_h["RB"], seeds["RB"], table,
+                      stated=RECIPES["RB"])
+    library = build_library(red, seed=3, progress=False, eps=EPS, settings=QUICK, base=base, densities=DENSITIES,
+                            thickness={f: measured[f] for f in RED_FILMS}, concentration_sd=CONCENTRATION_SD)
+    return library
+
+
+def test_concentration_factors_recover_a_shade_whose_black_is_off(concentrated):
+    """A shade whose black acts at 1.4 x its recipe's concentration: the factor's 90 % interval
+    holds 1.4; every other factor's holds its truth 1; only the minor fixed pigments get one (R, a
+    masstone, and RW1, whose minor pigment Red is being fitted, none; RW2's 50/50 tie leaves the
+    first pigment, Red, as dominant); the constants
+    hold their truth at the nominal rate (the rule of test_the_library_recovers_known_constants);
+    each film fits within its noise (rms < 3 eps)."""
+    library = concentrated
+    names = dict(zip(library.film_ids, library.concentration_names))
+    assert library.concentration_factor.shape[:2] == (library.constants.shape[0], len(library.film_ids))
+    records = {f["id"]: f for f in library.films}
+    assert [c["pigment"] for c in records["R"]["concentration_factors"]] == []
+    assert [c["pigment"] for c in records["RB"]["concentration_factors"]] == ["Black"]
+    assert [c["pigment"] for c in records["RW1"]["concentration_factors"]] == []  # Red is being fitted
+    assert [c["pigment"] for c in records["RW2"]["concentration_factors"]] == ["White"]
+    for i, film in enumerate(library.film_ids):
+        for c, pigment in enumerate(names[film]):
+            if not pigment:
+                continue
+            truth = CONCENTRATION_FACTOR if (film, pigment) == ("RB", "Black") else 1.0
+            low, high = np.quantile(library.concentration_factor[:, i, c], [0.05, 0.95])
+            assert low <= truth <= high, (film, pigment, low, high)
+    _assert_constants_covered(library)
+    for film in library.films:
+        if film["used"]:
+            assert film["rms_log_deviation"] < 3 * EPS, film
+    assert library.provenance["concentration_sd"] == CONCENTRATION_SD
+
+
+def test_concentration_factors_are_saved(concentrated, tmp_path):
+    """concentration_factor over (chain, draw, film, component) in the file, read back whole; the
+    pigment report's film table names each factor."""
+    back = load_library(concentrated.save(tmp_path / "library.nc"))
+    np.testing.assert_array_equal(back.concentration_factor, concentrated.concentration_factor)
+    assert back.concentration_names == concentrated.concentration_names
+    from bayespig.report.pigment import pigment_report
+
+    text = pigment_report(concentrated, "Red")["Red.md"]
+    factor = next(f for f in concentrated.films if f["id"] == "RB")["concentration_factors"][0]
+    assert f"Black {factor['median']:.3f} [{factor['q05']:.3f}, {factor['q95']:.3f}]" in text
+    assert "concentration_sd 0.3" in text
+
+
+@pytest.mark.parametrize("model", ["radiative-transfer", "kubelka-munk"])
+def test_without_concentration_sd_the_build_is_unchanged(simulated, model):
+    """concentration_sd=None is the default: the same draws for the same seed, no factors, no trace."""
+    sets, _, _ = simulated
+    films = {f: sets[f] for f in BASE_FILMS}
+    options = {"seed": 2, "progress": False, "eps": EPS, "settings": TINY, "densities": DENSITIES, "model": model}
+    default = build_library(films, **options)
+    explicit = build_library(films, concentration_sd=None, **options)
+    np.testing.assert_array_equal(explicit.constants, default.constants)
+    np.testing.assert_array_equal(explicit.thickness, default.thickness)
+    assert explicit.concentration_factor is None and explicit.concentration_names is None
+    assert "concentration_sd" not in explicit.provenance
+    assert all("concentration_factors" not in f for f in explicit.films)
+
+
+@pytest.mark.parametrize("bad", [-0.3, 0.0, float("nan"), float("inf"), "0.3", True])
+def test_a_bad_concentration_sd_is_refused_naming_it(simulated, bad):
+    sets, _, _ = simulated
+    with pytest.raises(ValueError, match="concentration_sd"):
+        build_library({"W": sets["W"]}, concentration_sd=bad, progress=False)
