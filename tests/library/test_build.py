@@ -335,20 +335,25 @@ def test_card_factors_are_saved_and_reported(carded, tmp_path):
 
 
 @pytest.mark.parametrize("model", ["radiative-transfer", "kubelka-munk"])
-def test_without_substrate_sd_the_build_is_unchanged(simulated, model):
-    """substrate_sd=None is the default: the same draws for the same seed, no card factors and no
-    trace of them in the provenance (the draws also equal those of the build before card factors
-    existed: checked against that code when they were added, not repeatable here)."""
-    sets, measured, _ = simulated
+@pytest.mark.parametrize("option, fields, record", [
+    ("substrate_sd", ("card_factor", "card_names"), "card_factors"),
+    ("concentration_sd", ("concentration_factor", "concentration_names"), "concentration_factors"),
+])
+def test_without_the_nuisance_options_the_build_is_unchanged(simulated, model, option, fields, record):
+    """substrate_sd=None and concentration_sd=None are the defaults: the same draws for the same
+    seed, no factors and no trace of them in the provenance or the film records (the draws also
+    equal those of the build before either existed: checked against that code when they were
+    added, not repeatable here)."""
+    sets, _, _ = simulated
     films = {f: sets[f] for f in BASE_FILMS}
     options = {"seed": 2, "progress": False, "eps": EPS, "settings": TINY, "densities": DENSITIES, "model": model}
     default = build_library(films, **options)
-    explicit = build_library(films, substrate_sd=None, **options)
+    explicit = build_library(films, **{option: None}, **options)
     np.testing.assert_array_equal(explicit.constants, default.constants)
     np.testing.assert_array_equal(explicit.thickness, default.thickness)
-    assert explicit.card_factor is None and explicit.card_names is None
-    assert "substrate_sd" not in explicit.provenance and all("card_factors" not in f for f in explicit.films)
-    assert all("card_factor_rhat_max" not in s for s in explicit.stages)
+    assert all(getattr(explicit, name) is None for name in fields)
+    assert option not in explicit.provenance and all(record not in f for f in explicit.films)
+    assert all(not any(key.startswith(record[:-1]) for key in stage) for stage in explicit.stages)
 
 
 @pytest.mark.parametrize("bad", [-0.1, 0.0, float("nan"), float("inf"), "0.1", True])
@@ -443,21 +448,6 @@ def test_concentration_factors_are_saved(concentrated, tmp_path):
     factor = next(f for f in concentrated.films if f["id"] == "RB")["concentration_factors"][0]
     assert f"Black {factor['median']:.3f} [{factor['q05']:.3f}, {factor['q95']:.3f}]" in text
     assert "concentration_sd 0.3" in text
-
-
-@pytest.mark.parametrize("model", ["radiative-transfer", "kubelka-munk"])
-def test_without_concentration_sd_the_build_is_unchanged(simulated, model):
-    """concentration_sd=None is the default: the same draws for the same seed, no factors, no trace."""
-    sets, _, _ = simulated
-    films = {f: sets[f] for f in BASE_FILMS}
-    options = {"seed": 2, "progress": False, "eps": EPS, "settings": TINY, "densities": DENSITIES, "model": model}
-    default = build_library(films, **options)
-    explicit = build_library(films, concentration_sd=None, **options)
-    np.testing.assert_array_equal(explicit.constants, default.constants)
-    np.testing.assert_array_equal(explicit.thickness, default.thickness)
-    assert explicit.concentration_factor is None and explicit.concentration_names is None
-    assert "concentration_sd" not in explicit.provenance
-    assert all("concentration_factors" not in f for f in explicit.films)
 
 
 @pytest.mark.parametrize("bad", [-0.3, 0.0, float("nan"), float("inf"), "0.3", True])
