@@ -130,9 +130,11 @@ from .recipes import concentrations, film_recipes
 __all__ = [
     "BASE_SHARE",
     "DEFAULT_SETTINGS",
+    "IMPLAUSIBLE_SDS",
     "START_BALL_SD",
     "LibraryLayout",
     "build_library",
+    "implausible_factor",
     "stage_plan",
 ]
 
@@ -152,6 +154,14 @@ START_POINTS = 64
 #: paper's section 3.4: the factor absorbs a misfit of the film; Revigo 06D's white card went to
 #: the prior's 5-sd truncation, f = 0.61, with its thickness from 1.18 to 0.27).
 IMPLAUSIBLE_SDS = 3.0
+
+
+def implausible_factor(q05, q95, relative_sd):
+    """Whether a nuisance factor ``f`` (a card's, a concentration's; prior ``log f ~ N(0, sd^2)``)
+    absorbs a misfit of its film rather than measures what it stands for: its whole 90 % interval
+    ``[q05, q95]`` lies beyond :data:`IMPLAUSIBLE_SDS` prior sds (prior mass 0.3 %). Revigo 06D's
+    white card (0.61 at sd 0.1) and the black of 12D (3.3 at sd 0.3) and 14D (0.30) are such."""
+    return bool(np.log(q05) > IMPLAUSIBLE_SDS * relative_sd or np.log(q95) < -IMPLAUSIBLE_SDS * relative_sd)
 
 def _film_model(name):
     if name not in FILM_MODELS:
@@ -782,7 +792,8 @@ def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, setting
                 concentration_names[i][c] = pigment
                 q05, q95 = np.quantile(values, [0.05, 0.95])
                 films.setdefault(film, {}).setdefault("concentration_factors", []).append(
-                    {"pigment": pigment, "median": float(np.median(values)), "q05": float(q05), "q95": float(q95)})
+                    {"pigment": pigment, "median": float(np.median(values)), "q05": float(q05), "q95": float(q95),
+                     "implausible": implausible_factor(q05, q95, concentration_sd)})
         column = 0
         for j, f in enumerate(r["films"]):
             h = r["thickness"][:n_draws, j]
@@ -802,10 +813,7 @@ def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, setting
                     q05, q95 = np.quantile(values, [0.05, 0.95])
                     factors.append({"card": card, "median": float(np.median(values)),
                                     "q05": float(q05), "q95": float(q95),
-                                    # the whole 90 % interval beyond 3 prior sds (prior mass 0.3 %): the
-                                    # factor absorbs a misfit of the film rather than measures its card
-                                    "implausible": bool(np.log(q05) > IMPLAUSIBLE_SDS * substrate_sd
-                                                        or np.log(q95) < -IMPLAUSIBLE_SDS * substrate_sd)})
+                                    "implausible": implausible_factor(q05, q95, substrate_sd)})
                 films[f]["card_factors"] = factors
     records = []
     for f in film_ids:

@@ -136,6 +136,7 @@ def pigment_report(library, pigment):
                                  + (" (beyond 3 prior sd: absorbs a misfit?)" if c.get("implausible") else "")
                                  for c in f.get("card_factors") or ()) or "—") if cards else None
             concentration = ("; ".join(f"{c['pigment']} {c['median']:.3f} [{c['q05']:.3f}, {c['q95']:.3f}]"
+                                       + (" (beyond 3 prior sd: absorbs a misfit?)" if c.get("implausible") else "")
                                        for c in f.get("concentration_factors") or ()) or "—") if conc else None
             lines.append(f"| {f['id']} | {recipe} | {f.get('stage', '')} | {h} | "
                          + (f"{factors} | " if cards else "")

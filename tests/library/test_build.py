@@ -14,6 +14,7 @@ from bayespig.data import simulate
 from bayespig.data.simulate import FilmSpec
 from bayespig.inference import InferenceSettings
 from bayespig.library import PigmentLibrary, build_library, load_library, stage_plan
+from bayespig.library.build import IMPLAUSIBLE_SDS, implausible_factor
 from bayespig.library.recipes import Recipe
 from bayespig.table import load_table
 
@@ -422,6 +423,8 @@ def test_concentration_factors_recover_a_shade_whose_black_is_off(concentrated):
     assert [c["pigment"] for c in records["RB"]["concentration_factors"]] == ["Black"]
     assert [c["pigment"] for c in records["RW1"]["concentration_factors"]] == []  # Red is being fitted
     assert [c["pigment"] for c in records["RW2"]["concentration_factors"]] == ["White"]
+    # a factor of 1.4 at this prior is plausible (log 1.4 < 3 sd); the flag's own logic is below
+    assert not any(c["implausible"] for r in records.values() for c in r["concentration_factors"])
     for i, film in enumerate(library.film_ids):
         for c, pigment in enumerate(names[film]):
             if not pigment:
@@ -455,3 +458,11 @@ def test_a_bad_concentration_sd_is_refused_naming_it(simulated, bad):
     sets, _, _ = simulated
     with pytest.raises(ValueError, match="concentration_sd"):
         build_library({"W": sets["W"]}, concentration_sd=bad, progress=False)
+
+
+def test_a_factor_whose_interval_lies_beyond_three_prior_sds_is_implausible():
+    sd = 0.3
+    edge = np.exp(IMPLAUSIBLE_SDS * sd)
+    assert implausible_factor(edge * 1.01, edge * 1.2, sd) and implausible_factor(1 / (edge * 1.2), 1 / (edge * 1.01), sd)
+    assert not implausible_factor(edge * 0.99, edge * 1.2, sd) and not implausible_factor(0.9, 1.1, sd)
+
