@@ -38,10 +38,10 @@ With ``n`` inferred (:class:`bayespig.inference.roughness.BinderIndexSpec`) the 
 at any ``n`` too: :class:`BinderIndexRoughTables` holds one rough table per node of the uniform
 axis :data:`BINDER_INDEX_NODES` (each an ordinary :class:`RoughLookupTable` at that ``n``, cached
 as such) and interpolates ``log q`` by a cubic Lagrange stencil in ``n``; the lobe is Walter's
-formula at the row's ``n``. Measured against the direct solver (GGX, alpha 0.02 / 0.2 / 0.6,
-a 0.01 / 0.3 / 0.9, 25 geometries, ``n`` between the nodes): worst relative error of the
-n-interpolation 2.4e-4 for a node spacing of 0.1, 5.1e-5 for 0.075, 3.1e-5 for 0.05 (largest at
-the smallest alpha); the axis uses 0.08 (about 1e-4).
+formula at the row's ``n``. Measured against the direct solver (``python benchmarks/rough_tables.py``:
+GGX, alpha 0.02 / 0.2 / 0.6, a 0.01 / 0.3 / 0.9, 25 geometries, ``n`` between the nodes): worst
+relative error of the n-interpolation 2.4e-4 for a node spacing of 0.1, 3.3e-5 for the axis'
+0.08.
 
 A table for a subset of another's geometries (the geometry subsets of a consistency check) is
 that table's columns: :func:`derive_rough_table` takes them instead of building it (the body

@@ -24,8 +24,8 @@ pytestmark = pytest.mark.usefixtures("private_table_cache")
 
 #: The table meets the accuracy goal of every look-up table, ROUGH_TABLE_TOLERANCE (2e-4), over
 #: its whole roughness range. Measured worst of the total on this test's 4 random points per
-#: range: 3.0e-5 in [0.01, 0.1], 1.1e-5 in [0.1, 1]; on 6 other points per range 3.0e-5 and
-#: 9.4e-5 (session 9; an earlier solver,
+#: range: 3.0e-5 in [0.01, 0.1], 1.1e-5 in [0.1, 1]; `python benchmarks/rough_tables.py`, 6 other
+#: points per range: 7.4e-6 and 4.8e-5 (session 9; an earlier solver,
 #: before the fine rules' finest panel was capped at large alpha, was 1.6e-2 at alpha 0.8, and
 #: this test had a looser tolerance there). The two ranges are drawn apart so that both the
 #: glossy and the matt end are always tested.
