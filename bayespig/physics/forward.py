@@ -42,7 +42,7 @@ from .adding_doubling import (
 )
 from .discrete_ordinates import SMALL_ABSORPTION, THIN_LAYER, radiances_under_surface
 from .fresnel import fresnel_reflectance, normal_transmittance, refracted_cosine
-from .microfacet import DISTRIBUTIONS, directional_albedo, reflection_brdf
+from .microfacet import DISTRIBUTIONS, directional_albedo, flake_reflection_brdf, reflection_brdf
 from .phase import ModeStopping, is_rayleigh, n_fourier_modes, normalise_on_quadrature, phase_fourier_modes
 from .quadrature import DEFAULT_QUADRATURE_POINTS, binder_quadrature, default_quadrature_points
 from .rough_surface import ROUGHNESS_MAX, rough_surface_terms
@@ -56,6 +56,7 @@ __all__ = [
     "binder_index",
     "brdf",
     "first_surface_brdf",
+    "flake_brdf",
     "hemispherical_reflectance",
     "mode_terms",
     "optical_thickness_from_transmittance",
@@ -788,6 +789,38 @@ def first_surface_brdf(theta_i, theta_o, delta_phi, *, roughness, n=1.45, distri
     return reflection_brdf(np.cos(np.radians(theta_i)), np.cos(np.radians(theta_o)),
                            np.radians(delta_phi) - np.pi, alpha=roughness, n_i=1.0, n_t=n,
                            distribution=distribution)
+
+
+def flake_brdf(theta_i, theta_o, delta_phi, *, flake_roughness, n=1.45, distribution="ggx"):
+    """The lobe of effect-pigment flakes inside the layer, per unit flake reflectance [1/sr].
+
+    :func:`bayespig.physics.microfacet.flake_reflection_brdf` in the project's geometry (angles
+    in air [deg], ``delta_phi = 180`` on the specular side). A film with flakes of reflectance
+    ``c`` (at a wavelength) adds ``c * flake_brdf(...)`` to its BRDF; the flakes' lobe is
+    coloured (``c`` depends on the wavelength) where the surface's own lobe
+    (:func:`first_surface_brdf`) is not.
+
+    Parameters
+    ----------
+    theta_i, theta_o, delta_phi : array_like
+        Geometry in air [deg].
+    flake_roughness : float or array_like
+        Roughness ``alpha`` of the flakes' orientation distribution [-] (> 0).
+    n : float
+        Binder index [-].
+    distribution : {"ggx", "beckmann"}
+
+    Returns
+    -------
+    numpy.ndarray
+        The arguments broadcast [1/sr].
+    """
+    n, distribution = binder_index(n), _distribution(distribution)
+    theta_i, theta_o, delta_phi = np.broadcast_arrays(*(np.asarray(x, dtype=float)
+                                                        for x in (theta_i, theta_o, delta_phi)))
+    return flake_reflection_brdf(np.cos(np.radians(theta_i)), np.cos(np.radians(theta_o)),
+                                 np.radians(delta_phi) - np.pi, alpha=flake_roughness, n=n,
+                                 distribution=distribution)
 
 
 def brdf(theta_i, theta_o, delta_phi, *, a, tau, g=0.0, r_s=0.0, n=1.45, roughness=0.0, part="total",

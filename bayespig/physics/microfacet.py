@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
-from .fresnel import fresnel_reflectance
+from .fresnel import fresnel_reflectance, refracted_cosine
 
 __all__ = [
     "ALBEDO_PANELS",
@@ -64,6 +64,7 @@ __all__ = [
     "DISTRIBUTIONS",
     "RoughSurfaceModes",
     "directional_albedo",
+    "flake_reflection_brdf",
     "microfacet_distribution",
     "reflection_brdf",
     "reflection_modes",
@@ -249,6 +250,70 @@ def _reflection(mu_i, mu_o, cos_psi, alpha, n_i, n_t, distribution):
     fresnel = fresnel_reflectance(cos_ih, n_i, n_t)
     g = _g1(mu_i, alpha, distribution) * _g1(mu_o, alpha, distribution)
     return fresnel * g * _distribution(cos_h, alpha, distribution) / (4.0 * mu_i * mu_o)
+
+
+def _flake_reflection(mu_i, mu_o, cos_psi, alpha, n, distribution):
+    """Flake lobe per unit flake reflectance [1/sr] on checked, broadcastable arrays (air cosines)."""
+    mu_i_in = refracted_cosine(mu_i, 1.0, n)
+    mu_o_in = refracted_cosine(mu_o, 1.0, n)
+    through = (1.0 - fresnel_reflectance(mu_i, 1.0, n)) * (1.0 - fresnel_reflectance(mu_o, 1.0, n))
+    s_i = np.sqrt(np.clip(1.0 - mu_i_in * mu_i_in, 0.0, None))
+    s_o = np.sqrt(np.clip(1.0 - mu_o_in * mu_o_in, 0.0, None))
+    i_dot_o = mu_i_in * mu_o_in - s_i * s_o * cos_psi
+    half_norm = np.sqrt(2.0 * (1.0 + i_dot_o))
+    cos_h = (mu_i_in + mu_o_in) / half_norm
+    g = _g1(mu_i_in, alpha, distribution) * _g1(mu_o_in, alpha, distribution)
+    return through * g * _distribution(cos_h, alpha, distribution) / (4.0 * mu_i_in * mu_o_in * n * n)
+
+
+def flake_reflection_brdf(mu_i, mu_o, psi, *, alpha, n, distribution="ggx"):
+    """Angular shape of the light reflected by flakes inside the layer (effect pigments), seen from air [1/sr].
+
+    Platelets (metal or pearlescent flakes) lying nearly parallel to the surface inside the
+    binder reflect like mirror facets whose normals spread around the layer's normal. Seen
+    from air through the (mean, smooth) surface, per unit *flake reflectance* ``c``:
+
+    ``f_flake = T(mu_i) T(mu_o) / n^2 * G1(i') G1(o') D(h') / (4 mu_i' mu_o')``
+
+    with ``i'``, ``o'`` the directions refracted into the binder (Snell; the azimuth is kept),
+    ``h'`` their half vector, ``D`` and ``G1`` the microfacet distribution of the flake normals
+    and Smith's masking of this module (Walter et al. 2007, eqs. 20, 23, 33/25) with the
+    flakes' roughness ``alpha`` and no Fresnel factor (``c`` is the flakes' reflectance), and
+    ``T = 1 - r_F`` the smooth surface's Fresnel transmittance in and out; ``1 / n^2`` is the
+    radiance's change across the interface (``L / n^2`` is invariant), so that a Lambertian
+    ``f'`` inside would give ``T T f' / n^2`` in air. Light reflected by flakes beyond the
+    critical angle stays in the layer (no air direction maps onto it).
+
+    Scope (stated, not modelled): the flakes' depth in the layer (the attenuation of the light
+    on its way to them, and what the pigment does to it, is in ``c(lambda)`` and not in the
+    shape), light that the body scatters onto flakes and back, and the rough surface's
+    blurring of the lobe (that widens it: it is in the fitted ``alpha``). Reciprocal
+    (``f(i, o) = f(o, i)``); its directional albedo is at most ``c``.
+
+    Parameters
+    ----------
+    mu_i, mu_o : array_like
+        Cosines of the incidence and viewing angles in air [-], in (0, 1].
+    psi : array_like
+        Difference of the propagation azimuths [rad] (0 at the mirror direction; the project's
+        ``delta_phi = psi + pi``).
+    alpha : float or array_like
+        Roughness of the flakes' orientation distribution [-] (> 0).
+    n : float
+        Binder index [-].
+    distribution : {"ggx", "beckmann"}
+
+    Returns
+    -------
+    numpy.ndarray
+        ``f_flake / c`` [1/sr], the arguments broadcast.
+    """
+    alpha = np.asarray(alpha, dtype=float)
+    if not (np.isfinite(alpha).all() and (alpha > 0).all()):
+        raise ValueError(f"alpha must be > 0, got {alpha!r}")
+    n_i, n = _check_indices(1.0, n)
+    return _flake_reflection(_check_cosines("mu_i", mu_i), _check_cosines("mu_o", mu_o), np.cos(_check_psi(psi)),
+                             alpha, n, _check_distribution(distribution))
 
 
 def _transmission(mu_i, mu_o, cos_psi, alpha, n_i, n_t, distribution):
