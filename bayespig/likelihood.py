@@ -390,8 +390,12 @@ class Priors:
     the additive noise floor ``sigma0`` log-uniform on ``noise_floor_range`` when inferred
     (in the units of the values: 1/sr for BRDF, a fraction for hemispherical values; the
     default 1e-6 .. 1 spans a floor far below any paint's BRDF to one above the brightest
-    diffuse body, ~0.3 1/sr). In the sampled coordinates ``[a, log tau, g, log eps, log
-    sigma0]`` every prior is flat on a box.
+    diffuse body, ~0.3 1/sr); the reflectance ``c`` of effect-pigment flakes per band
+    log-uniform on ``flake_reflectance_range`` when the films have flakes
+    (:func:`bayespig.physics.forward.flake_brdf`; 1e-5 .. 1: from a lobe far below the noise
+    floor of any gonio reading to flakes that return all the light reaching them). In the
+    sampled coordinates ``[a, log tau, g, log eps, log sigma0]`` (and ``log c``) every prior is
+    flat on a box.
 
     Raises
     ------
@@ -404,11 +408,12 @@ class Priors:
     g_range: tuple = (-0.5, 0.8)
     eps_range: tuple = (1e-3, 0.5)
     noise_floor_range: tuple = (1e-6, 1.0)
+    flake_reflectance_range: tuple = (1e-5, 1.0)
 
     def __post_init__(self):
         domains = {"a_range": (0.0, 1.0, True), "tau_range": (0.0, np.inf, False),
                    "g_range": (-1.0, 1.0, False), "eps_range": (0.0, np.inf, False),
-                   "noise_floor_range": (0.0, np.inf, False)}
+                   "noise_floor_range": (0.0, np.inf, False), "flake_reflectance_range": (0.0, 1.0, True)}
         for name, (low, high, closed) in domains.items():
             try:
                 lo, hi = (float(v) for v in getattr(self, name))
@@ -419,6 +424,9 @@ class Priors:
                 bracket = "[{}, {}]" if closed else "({}, {})"
                 raise ValueError(f"{name} must satisfy low < high inside {bracket.format(low, high)}, "
                                  f"got {getattr(self, name)}")
+        if not float(self.flake_reflectance_range[0]) > 0.0:  # log-uniform: its low end must be > 0
+            raise ValueError(f"flake_reflectance_range must start above 0 (a log-uniform prior), "
+                             f"got {self.flake_reflectance_range}")
 
     def describe(self):
         """One line per parameter, for reports."""
@@ -429,6 +437,8 @@ class Priors:
             "eps": f"log-uniform on [{self.eps_range[0]:g}, {self.eps_range[1]:g}] (when inferred)",
             "noise_floor": (f"log-uniform on [{self.noise_floor_range[0]:g}, {self.noise_floor_range[1]:g}] "
                             "in the units of the values (when inferred)"),
+            "flake_reflectance": (f"log-uniform on [{self.flake_reflectance_range[0]:g}, "
+                                  f"{self.flake_reflectance_range[1]:g}] (films with flakes)"),
         }
 
 
@@ -452,6 +462,13 @@ class ForwardModel:
         instrument)`` and, at this roughness, under the instrument
         (:class:`~bayespig.rough_table.FixedRoughnessTable`); :class:`WavelengthModel` then
         also takes a roughness per row.
+    flakes : bool
+        The films hold effect-pigment flakes: :class:`WavelengthModel` then adds ``c *``
+        :func:`bayespig.physics.forward.flake_brdf` to every BRDF channel, with the flake
+        reflectance ``c`` and the flakes' roughness per row (inputs ``flake_reflectance``,
+        ``flake_roughness``). Needs ``roughness > 0`` (a gonio paint's surface) and BRDF or
+        45°/0° channels only (the flakes' directional albedo for hemispherical channels is not
+        tabulated).
     binder_index_free : bool
         Also load the rough tables at every binder-index node
         (:func:`bayespig.rough_table.load_binder_index_tables`, held in ``tables`` under
@@ -465,6 +482,7 @@ class ForwardModel:
     tables: dict = field(default_factory=dict)
     roughness: float = 0.0
     binder_index_free: bool = False
+    flakes: bool = False
 
     def __post_init__(self):
         from .table import load_table
@@ -475,8 +493,17 @@ class ForwardModel:
         if self.binder_index_free and not self.rough:
             raise ValueError("a binder index per row needs roughness > 0 (the look-up tables over n are those "
                              "of a rough surface)")
+        if self.flakes and not self.rough:
+            raise ValueError("flakes need roughness > 0 (the flakes' lobe is modelled with the tables of a rough "
+                             "surface)")
         if self.rough:
             self._rough_tables()
+            if self.flakes:
+                hemispherical = sorted({film.instrument.name for film in self.problem.films
+                                        if any(ch.kind == "hemispherical" for ch in film.instrument.channels)})
+                if hemispherical:
+                    raise ValueError(f"flakes are modelled for BRDF and 45/0 channels only; instrument(s) "
+                                     f"{', '.join(map(repr, hemispherical))} have hemispherical channels")
             return
         self._film_tables = []
         for film in self.problem.films:
@@ -700,7 +727,8 @@ class WavelengthModel:
             start = stop
         self._tau_min = min([u[0].tau_min for u in self._units.values() if u[1] >= 0], default=0.0)
 
-    def __call__(self, a, tau, g=None, r_s_scale=None, member=None, roughness=None, binder_index=None):
+    def __call__(self, a, tau, g=None, r_s_scale=None, member=None, roughness=None, binder_index=None,
+                 flake_reflectance=None, flake_roughness=None):
         """Predicted values, shape (W, n_values).
 
         Parameters
@@ -727,11 +755,22 @@ class WavelengthModel:
             Shape (W,) or (W, 1): binder index ``n`` of the films per row [-] (the index as a
             parameter), in the binder-index tables' range; with ``roughness``. None for the
             problem's own ``n``. Needs ``ForwardModel(binder_index_free=True)``.
+        flake_reflectance, flake_roughness : numpy.ndarray, optional
+            Shape (W,) each: the reflectance ``c`` of the films' effect-pigment flakes at the
+            row's wavelength [-] and their roughness [-]; both or neither, with
+            ``roughness``. Needs ``ForwardModel(flakes=True)``, which needs them.
         """
         if binder_index is not None and roughness is None:
             raise ValueError("binder_index per row needs roughness per row as well")
+        if (flake_reflectance is None) != (flake_roughness is None):
+            raise ValueError("flake_reflectance and flake_roughness go together (both per row, or neither)")
+        if (flake_reflectance is not None) != self.model.flakes:
+            raise ValueError("a ForwardModel with flakes=True needs flake_reflectance and flake_roughness per row "
+                             "(and one without flakes takes neither)")
+        if flake_reflectance is not None and roughness is None:
+            raise ValueError("flake_reflectance per row needs roughness per row as well")
         if roughness is not None:
-            return self._call_rough(a, roughness, member, binder_index)
+            return self._call_rough(a, roughness, member, binder_index, flake_reflectance, flake_roughness)
         a = np.asarray(a, dtype=float)
         tau = np.asarray(tau, dtype=float).reshape(a.shape[0], -1)
         g = None if g is None else np.asarray(g, dtype=float)
@@ -782,8 +821,9 @@ class WavelengthModel:
                              f"got {np.shape(value)}")
         return column[:, 0]
 
-    def _call_rough(self, a, roughness, member, binder_index=None):
-        """Predictions with a roughness (and a binder index) per row (opaque films under a rough surface)."""
+    def _call_rough(self, a, roughness, member, binder_index=None, flake_reflectance=None, flake_roughness=None):
+        """Predictions with a roughness (and a binder index, and flakes) per row (opaque films under a rough
+        surface)."""
         if not self.model.rough:
             raise ValueError("roughness per row needs a ForwardModel with roughness > 0 (the look-up tables "
                              "of a rough surface)")
@@ -798,6 +838,10 @@ class WavelengthModel:
             len(parts) > 1 for _, parts in self._rough_units.values()) else None
         # the lobe depends on the surface alone: once per distinct value (one per walker)
         surface = alpha[:, None] if n is None else np.stack([alpha, n], axis=1)
+        if flake_reflectance is not None:
+            flake_c = self._per_row("flake_reflectance", flake_reflectance, a.shape[0])
+            flake_alpha = self._per_row("flake_roughness", flake_roughness, a.shape[0])
+            surface = np.concatenate([surface, flake_alpha[:, None]], axis=1)
         distinct, inverse = np.unique(surface, axis=0, return_inverse=True)
         inverse = inverse.ravel()
         units = list(self._rough_units.values())
@@ -809,6 +853,10 @@ class WavelengthModel:
                 family = self.model.binder_index_tables[rough.key]
                 values = family.body(a, alpha, n)
                 values += family.lobe(distinct[:, 0], distinct[:, 1])[inverse]
+            if flake_reflectance is not None:
+                # the flakes' lobe: Walter's shape once per distinct (flake roughness, n), times c per row
+                values += flake_c[:, None] * rough.flake_lobe(
+                    distinct[:, -1], None if n is None else distinct[:, 1])[inverse]
             if len(units) == 1 and len(parts) == 1 and parts[0] == slice(0, self.n_values):
                 return values  # one film: no copy
             for part in parts:

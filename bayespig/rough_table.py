@@ -71,7 +71,7 @@ from ._pool import executor_or_local_pool
 from ._validation import integer, real_scalar
 from .instruments import Instrument, channel_directions, get_instrument
 from .physics.forward import specular_port_reflectance, surface_terms
-from .physics.microfacet import _reflection, directional_albedo
+from .physics.microfacet import _flake_reflection, _reflection, directional_albedo
 from .physics.quadrature import DEFAULT_QUADRATURE_POINTS
 from .table import (
     A_MAX_EVAL,
@@ -422,6 +422,26 @@ class RoughLookupTable:
             rows = start[:, None] + np.arange(4)
             out[:, self._hemispherical] = np.einsum(
                 "ps,psc->pc", weights, self.arrays["lobe"][:, self._hemispherical][rows])
+        return out
+
+    def flake_lobe(self, flake_roughness, binder_index=None):
+        """The effect-pigment flakes' lobe per unit flake reflectance at every BRDF channel, (P, K) [channel units].
+
+        :func:`bayespig.physics.microfacet.flake_reflection_brdf` at each row's flake roughness
+        (P,) and binder index (P,; None: the table's ``n``), times ``pi`` for a reflectance
+        factor. Hemispherical channels have no flake lobe here (0): a film with flakes is for
+        BRDF channels (:class:`bayespig.likelihood.ForwardModel` refuses others).
+        """
+        flake_roughness = np.asarray(flake_roughness, dtype=float).reshape(-1)
+        n = (np.full(flake_roughness.size, self.instrument.n) if binder_index is None
+             else np.asarray(binder_index, dtype=float).reshape(-1))
+        out = np.zeros((flake_roughness.size, self.n_channels))
+        if self._analytic.size:
+            for index in np.unique(n):  # one index per call of the formula: one per walker
+                rows = np.flatnonzero(n == index)
+                out[np.ix_(rows, self._analytic)] = self._factor * _flake_reflection(
+                    self._mu_i, self._mu_o, self._cos_psi, flake_roughness[rows, None], float(index),
+                    self.settings.distribution)
         return out
 
     def __call__(self, *, a, roughness, part="total"):

@@ -16,6 +16,8 @@ VARIABLE_ATTRS = {
     "eps": {"long_name": "relative measurement error eps (eq. 7)", "units": "1"},
     # units of noise_floor: those of the measured values, set per result (noise_floor_units)
     "noise_floor": {"long_name": "additive noise floor sigma0 (sd of a reading of 0)"},
+    "flake_reflectance": {"long_name": "reflectance c of the effect-pigment flakes (their lobe: "
+                                       "bayespig.physics.forward.flake_brdf)", "units": "1"},
 }
 #: ... and of the wavelength coordinate of every group.
 WAVELENGTH_ATTRS = {"long_name": "wavelength", "units": "nm"}
@@ -132,7 +134,8 @@ def _prior_bounds(priors, posterior, shared=()):
     """
     ranges = {"a": (priors.a_range, "linear"), "tau": (priors.tau_range, "log"),
               "tau_group": (priors.tau_range, "log"), "g": (priors.g_range, "linear"),
-              "eps": (priors.eps_range, "log"), "noise_floor": (priors.noise_floor_range, "log")}
+              "eps": (priors.eps_range, "log"), "noise_floor": (priors.noise_floor_range, "log"),
+              "flake_reflectance": (priors.flake_reflectance_range, "log")}
     bounds = {name: {"lower": float(low), "upper": float(high), "scale": scale}
               for name, ((low, high), scale) in ranges.items() if name in posterior}
     for spec in shared:
@@ -200,6 +203,8 @@ def _inference_data(problem, model, results, settings, log_post0, fit, *, seed, 
                   else "known" if getattr(log_post0, "has_noise_floor", False) else "none")
     if floor_mode == "inferred":
         posterior["noise_floor"] = (cdw, stack("noise_floor"))
+    if "flake_reflectance" in results[0]:
+        posterior["flake_reflectance"] = (cdw, stack("flake_reflectance"))
     post_coords = dict(coords)
     if len(groups) > 1:
         post_coords["group"] = groups
@@ -213,6 +218,8 @@ def _inference_data(problem, model, results, settings, log_post0, fit, *, seed, 
     if settings.predictive_noise:
         predictive["y_rep"] = (cdw + ("value",), stack("y_rep").astype(STORED_DRAW_DTYPE))
     parameters = list(log_post0.parameter_names)
+    if "flake_reflectance" in results[0]:  # the joint run's block: [a, log tau.., log c, (log sigma0)]
+        parameters.insert(1 + len(groups), "log_flake_reflectance")
     sample_stats = {
         "lp": (cdw, stack("lp")),
         "acceptance_rate": (("chain", "wavelength"), stack("acceptance_rate", axis=1)),

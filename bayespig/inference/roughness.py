@@ -49,7 +49,8 @@ from .shared import FilmLayout, SharedParameter
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 
-__all__ = ["BINDER_INDEX_PRIOR", "ROUGHNESS_START_SD", "BinderIndexSpec", "NoiseFloorFilmLayout",
+__all__ = ["BINDER_INDEX_PRIOR", "FLAKE_ROUGHNESS_RANGE", "ROUGHNESS_START_SD", "BinderIndexSpec", "FlakeRoughnessSpec",
+           "NoiseFloorFilmLayout",
            "RoughnessSpec", "binder_index_argument", "binder_index_prior_argument", "roughness_argument"]
 
 #: Draws per chain kept by the pilot of a roughness or noise-floor joint run: it only gives the
@@ -61,6 +62,14 @@ ROUGHNESS_START_SD = 0.02
 BINDER_INDEX_PRIOR = (1.45, 0.05)
 #: Spread of the walkers' start around the nominal binder index [-].
 BINDER_INDEX_START_SD = 0.005
+#: Prior support of the flakes' roughness [-]: from flakes aligned to within ~1 deg to flakes of
+#: every orientation.
+FLAKE_ROUGHNESS_RANGE = (0.02, 1.0)
+#: Flake roughness of the start [-] (the Cornell garnet red's least-squares value is ~0.35:
+#: ``python benchmarks/cornell_surface_models.py``).
+FLAKE_ROUGHNESS_NOMINAL = 0.3
+#: Spread of the walkers' start around the nominal ``log alpha_f`` [-].
+FLAKE_ROUGHNESS_START_SD = 0.05
 
 
 def roughness_argument(roughness, name="roughness"):
@@ -251,11 +260,79 @@ class RoughnessSpec(SharedParameter):
                 "nominal": float(np.exp(self.nominal[0])), "prior": self.describe_prior()}
 
 
+class FlakeRoughnessSpec(SharedParameter):
+    """One roughness of the effect-pigment flakes for every film of a set: a spec of
+    :mod:`bayespig.inference.shared`.
+
+    The flakes' lobe (:func:`bayespig.physics.forward.flake_brdf`) has a reflectance ``c`` per
+    band (a block coordinate of the film layout, :class:`~bayespig.inference.shared.FilmLayout`)
+    and one shape at every band: the spread of the flakes' orientations, GGX's ``alpha`` of their
+    normals about the layer's normal. One coordinate ``log alpha_f``, log-uniform on
+    ``alpha_range`` (:data:`FLAKE_ROUGHNESS_RANGE`), entering the forward model as the per-row
+    input ``flake_roughness``; stored as ``flake_roughness`` over ``(chain, draw, surface)``.
+
+    Parameters
+    ----------
+    alpha_range : (float, float)
+        Support of the log-uniform prior [-].
+    nominal : float
+        Flake roughness of the start [-], inside ``alpha_range``.
+    label : str
+        Name of the surface (the coordinate of the dimension ``surface``).
+    """
+
+    title = "flake roughness"
+    variable = "flake_roughness"
+    dimension = "surface"
+    long_name = "GGX roughness alpha of the effect-pigment flakes' orientations"
+    units = "1"
+    coordinate_name = "log_flake_roughness"
+    attribute = "flake_roughness_prior"
+    prior_scale = "log"
+
+    def __init__(self, alpha_range=None, nominal=None, label="surface"):
+        low, high = (float(v) for v in (alpha_range or FLAKE_ROUGHNESS_RANGE))
+        nominal = FLAKE_ROUGHNESS_NOMINAL if nominal is None else float(nominal)
+        if not (0.0 < low < high and np.isfinite(high)):
+            raise ValueError(f"alpha_range must be (low, high) with 0 < low < high, got {alpha_range!r}")
+        if not low <= nominal <= high:
+            raise ValueError(f"nominal flake roughness {nominal!r} must lie in alpha_range {(low, high)!r}")
+        self.alpha_range = (low, high)
+        self.labels = (str(label),)
+        self.lower, self.upper = np.array([np.log(low)]), np.array([np.log(high)])
+        self.nominal = np.array([np.log(nominal)])
+        self.start_sd = np.array([FLAKE_ROUGHNESS_START_SD])
+
+    def log_prior(self, x):
+        """Log-uniform in ``alpha_f``: flat in the sampled ``log alpha_f`` (0 inside the box), (W,)."""
+        return np.zeros(np.shape(x)[0])
+
+    def physical(self, x):
+        """``alpha_f = exp(log alpha_f)``."""
+        return np.exp(x)
+
+    def model_inputs(self, x):
+        """``flake_roughness``: every row's ``alpha_f``, (W,)."""
+        return {"flake_roughness": np.exp(np.asarray(x)[:, 0])}
+
+    def describe_prior(self):
+        """The prior as text (provenance)."""
+        return (f"log-uniform on [{self.alpha_range[0]:g}, {self.alpha_range[1]:g}], one flake roughness for "
+                "every film of the set")
+
+    def describe(self):
+        """Range, label and prior (the ``flake_roughness_prior`` attribute)."""
+        return {"alpha_range": list(self.alpha_range), "surfaces": list(self.labels),
+                "nominal": float(np.exp(self.nominal[0])), "prior": self.describe_prior()}
+
+
 class NoiseFloorFilmLayout(FilmLayout):
     """The film layout with an inferred additive noise floor per wavelength.
 
-    Blocks ``[a, log tau_1..G, log sigma0]``; flat order ``[a (n_wl), log tau (n_wl * G),
-    log sigma0 (n_wl)]``; likelihood ``N(x_obs | x, (eps x)^2 + sigma0^2)``.
+    Blocks ``[a, log tau_1..G, (log c), log sigma0]``; flat order ``[a (n_wl), log tau (n_wl * G),
+    (log c (n_wl)), log sigma0 (n_wl)]`` (``log c``: the flakes' reflectance of a model with
+    flakes, :class:`~bayespig.inference.shared.FilmLayout`); likelihood ``N(x_obs | x, (eps x)^2 +
+    sigma0^2)``.
 
     Parameters
     ----------
@@ -276,10 +353,10 @@ class NoiseFloorFilmLayout(FilmLayout):
 
     @property
     def flat_index(self):
-        """``[a (n_wl), log tau (n_wl * G), log sigma0 (n_wl)]``."""
-        n_wl, G = self.n_wavelengths, self.n_groups
+        """``[a (n_wl), log tau (n_wl * G), (log c (n_wl)), log sigma0 (n_wl)]``."""
         film = super().flat_index
-        return np.concatenate([film, (n_wl * (1 + G) + np.arange(n_wl))[:, None]], axis=1)
+        return np.concatenate([film, (self.n_wavelengths * self.film_size + np.arange(self.n_wavelengths))[:, None]],
+                              axis=1)
 
     @property
     def parameter_names(self):
@@ -293,6 +370,10 @@ class NoiseFloorFilmLayout(FilmLayout):
     def unpack(self, theta):
         """``a`` (W, n_wl) and ``tau`` (W, n_wl, G) (the floor: :meth:`noise_floor_of`)."""
         return super().unpack(theta[..., :-1])
+
+    def flake_reflectance_of(self, theta):
+        """The flakes' reflectance ``c`` of every block (W, n_wl) [-] (None without flakes)."""
+        return super().flake_reflectance_of(theta[..., :-1])
 
     def noise_floor_of(self, theta):
         """The floor ``sigma0`` of every block (W, n_wl) [units of the values]."""

@@ -288,7 +288,11 @@ class FilmLayout(BlockLayout):
 
     The flat order is ``[a (n_wl), log tau (n_wl * G)]``; the box that of
     :class:`bayespig.likelihood.Priors`; the values those of the per-wavelength model
-    (:class:`bayespig.likelihood.WavelengthModel`) with the specs' keywords.
+    (:class:`bayespig.likelihood.WavelengthModel`) with the specs' keywords. A model with
+    effect-pigment flakes (``ForwardModel(flakes=True)``) has one more coordinate per
+    wavelength, ``log c`` (the flakes' reflectance, log-uniform on
+    ``priors.flake_reflectance_range``), after the ``log tau``: blocks ``[a, log tau_1..G,
+    log c]``, flat order ``[a (n_wl), log tau (n_wl * G), log c (n_wl)]``.
 
     Parameters
     ----------
@@ -308,40 +312,63 @@ class FilmLayout(BlockLayout):
         self.wavelength_nm = np.asarray(problem.wavelength_nm, dtype=float)
         self.n_groups = G = len(problem.groups)
         self.names = ("a",) + (("log_tau",) if G == 1 else tuple(f"log_tau[{g}]" for g in problem.groups))
+        self.flakes = bool(getattr(model, "flakes", False))
         n_wl = self.n_wavelengths
         self.evaluate = model.at_wavelength(list(range(n_wl)))
         self.observed = np.stack([problem.observed(i) for i in range(n_wl)])
         self.eps = problem.known_eps(eps)
-        self.lower = np.tile(np.concatenate([[priors.a_range[0]], np.full(G, np.log(priors.tau_range[0]))]),
-                             (n_wl, 1))
-        self.upper = np.tile(np.concatenate([[priors.a_range[1]], np.full(G, np.log(priors.tau_range[1]))]),
-                             (n_wl, 1))
+        low = [priors.a_range[0]] + [np.log(priors.tau_range[0])] * G
+        high = [priors.a_range[1]] + [np.log(priors.tau_range[1])] * G
+        if self.flakes:
+            self.names = self.names + ("log_flake_reflectance",)
+            low.append(np.log(priors.flake_reflectance_range[0]))
+            high.append(np.log(priors.flake_reflectance_range[1]))
+        self.lower = np.tile(np.array(low, dtype=float), (n_wl, 1))
+        self.upper = np.tile(np.array(high, dtype=float), (n_wl, 1))
+
+    @property
+    def film_size(self):
+        """Coordinates of a block that belong to the film model: ``1 + G`` (``+ 1`` with flakes)."""
+        return 1 + self.n_groups + self.flakes
 
     @property
     def flat_index(self):
-        """``[a (n_wl), log tau (n_wl * G)]``: a wavelength's ``a`` at ``i``, its ``log tau_g`` at
-        ``n_wl + i * G + g``."""
+        """``[a (n_wl), log tau (n_wl * G), (log c (n_wl))]``: a wavelength's ``a`` at ``i``, its
+        ``log tau_g`` at ``n_wl + i * G + g``, its ``log c`` at ``n_wl (1 + G) + i``."""
         n_wl, G = self.n_wavelengths, self.n_groups
-        return np.concatenate([np.arange(n_wl)[:, None], n_wl + np.arange(n_wl * G).reshape(n_wl, G)], axis=1)
+        columns = [np.arange(n_wl)[:, None], n_wl + np.arange(n_wl * G).reshape(n_wl, G)]
+        if self.flakes:
+            columns.append((n_wl * (1 + G) + np.arange(n_wl))[:, None])
+        return np.concatenate(columns, axis=1)
 
     @property
     def parameter_names(self):
-        """``r_a[w]`` then ``r_log_tau[w,group]``."""
+        """``r_a[w]`` then ``r_log_tau[w,group]`` (then ``r_log_flake_reflectance[w]``)."""
         wl = [f"{w:g}" for w in self.wavelength_nm]
-        return tuple([f"r_a[{w}]" for w in wl] + [f"r_log_tau[{w},{g}]" for w in wl for g in self.problem.groups])
+        names = [f"r_a[{w}]" for w in wl] + [f"r_log_tau[{w},{g}]" for w in wl for g in self.problem.groups]
+        if self.flakes:
+            names += [f"r_log_flake_reflectance[{w}]" for w in wl]
+        return tuple(names)
 
     def predict(self, theta, inputs):
-        """The film problem's values from ``[a, log tau]`` per wavelength, (W, n_wl, n_values)."""
+        """The film problem's values from ``[a, log tau, (log c)]`` per wavelength, (W, n_wl, n_values)."""
         W, n_wl = theta.shape[:2]
         member = np.tile(np.arange(n_wl), W)
         rows = {key: np.repeat(value, n_wl, axis=0) for key, value in inputs.items()}
-        values = self.evaluate(theta[..., 0].reshape(-1), np.exp(theta[..., 1:]).reshape(W * n_wl, -1), None,
+        G = self.n_groups
+        if self.flakes:
+            rows["flake_reflectance"] = np.exp(theta[..., 1 + G]).reshape(-1)
+        values = self.evaluate(theta[..., 0].reshape(-1), np.exp(theta[..., 1:1 + G]).reshape(W * n_wl, -1), None,
                                member=member, **rows)
         return values.reshape(W, n_wl, -1)
 
     def unpack(self, theta):
         """``a`` (W, n_wl) and ``tau`` (W, n_wl, G)."""
-        return theta[..., 0], np.exp(theta[..., 1:])
+        return theta[..., 0], np.exp(theta[..., 1:1 + self.n_groups])
+
+    def flake_reflectance_of(self, theta):
+        """The flakes' reflectance ``c`` of every block (W, n_wl) [-] (None without flakes)."""
+        return np.exp(theta[..., 1 + self.n_groups]) if self.flakes else None
 
 
 class JointLogPosterior:
@@ -829,7 +856,10 @@ def sample_joint(model, specs, draws, priors, eps, settings, joint_seed, start_s
         rows = flat[first:first + step]
         model_values[first:first + step] = joint.predict(rows)
         pointwise[first:first + step] = joint.log_likelihood(rows)
-    floor = None if noise_floor_of is None else noise_floor_of(joint.blocks_of(joint.theta_of(flat)[0]))
+    blocks = joint.blocks_of(joint.theta_of(flat)[0])
+    floor = None if noise_floor_of is None else noise_floor_of(blocks)
+    flake_of = getattr(joint.layout, "flake_reflectance_of", None)
+    flake = None if flake_of is None else flake_of(blocks)
     noisy = None
     if used.predictive_noise:
         rng = np.random.default_rng(run["predictive_seed"])
@@ -854,6 +884,8 @@ def sample_joint(model, specs, draws, priors, eps, settings, joint_seed, start_s
         }
         if floor is not None:
             record["noise_floor"] = floor[:, i].reshape(shape)
+        if flake is not None:
+            record["flake_reflectance"] = flake[:, i].reshape(shape)
         if noisy is not None:
             record["y_rep"] = noisy[:, i].reshape(shape + (-1,))
         records.append(record)

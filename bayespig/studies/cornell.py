@@ -104,6 +104,10 @@ class CornellStudySettings:
         The binder index of the rough fits: inferred with the roughness (the default; its
         tables at the six index nodes are built once per geometry set, the subsets' taken from
         the full set's, :func:`bayespig.rough_table.derive_rough_table`) or None (fixed at 1.45).
+    flakes : bool
+        Fit the paints with an effect-pigment lobe (``infer(..., flakes=True)``: a flake
+        reflectance per band, one flake roughness; the default), and the full set without it
+        as well, for comparison; False: the surface alone (the model of before).
     seed : int
     """
 
@@ -115,6 +119,7 @@ class CornellStudySettings:
     inference: InferenceSettings = dataclasses.field(
         default_factory=lambda: InferenceSettings(draws_per_chain=256, target_ess=400, max_steps=8000))
     binder_index: str | None = "free"
+    flakes: bool = True
     seed: int = 0
 
 
@@ -217,6 +222,11 @@ def fit_summary(idata, *, interval=INTERVAL):
                            if "binder_index" in post else None)
     out["noise_floor"] = (np.median(q.posterior_draws(idata, "noise_floor"), axis=0)
                           if "noise_floor" in post else None)
+    out["flake_roughness"] = (tuple(np.quantile(np.asarray(post["flake_roughness"].values, dtype=float).ravel(),
+                                                [tail, 0.5, 1.0 - tail]))
+                              if "flake_roughness" in post else None)
+    out["flake_reflectance"] = (np.quantile(q.posterior_draws(idata, "flake_reflectance"), [tail, 0.5, 1.0 - tail],
+                                            axis=0) if "flake_reflectance" in post else None)
     residuals = q.residuals_in_eps(idata)
     gonio = q.gonio_residual_summary(residuals)
     out["gonio"] = gonio
@@ -300,10 +310,14 @@ def cornell_study(folder=None, settings=None, paints=None, progress=None):
         result = {"counts": {"all": _n_geometries(measurements), "full": _n_geometries(full),
                              "far": _n_geometries(far), "near": _n_geometries(near)}}
         bands = None if settings.full_bands is None else list(settings.full_bands)
-        surface = {"roughness": "free", "binder_index": settings.binder_index}
+        surface = {"roughness": "free", "binder_index": settings.binder_index, "flakes": settings.flakes}
         say(f"{paint}: full fit, {result['counts']['full']} geometries, roughness"
-            + (" and binder index" if settings.binder_index else "") + " free")
+            + (" and binder index" if settings.binder_index else "") + " free"
+            + (", with flakes" if settings.flakes else ""))
         result["full"] = _infer(full, settings, wavelengths=bands, **surface)
+        if settings.flakes:
+            say(f"{paint}: full fit without flakes, for comparison")
+            result["no_flakes"] = _infer(full, settings, wavelengths=bands, **{**surface, "flakes": False})
         _derive_subset_tables(full, (far, near), settings.binder_index == "free")
         subset_bands = None if settings.subset_bands is None else list(settings.subset_bands)
         for name in ("far", "near"):
