@@ -277,3 +277,16 @@ def test_rejects_bad_index_and_distribution():
         keywords = {"alpha": 0.2, "n": 1.5} if function is flake_reflection_brdf else {"flake_roughness": 0.2}
         with pytest.raises(ValueError, match="distribution must be one of"):
             function(*arguments, distribution="lambert", **keywords)
+
+
+@pytest.mark.parametrize("alpha", [None, "0.2", True, ["0.2"]])
+def test_rejects_non_numeric_alpha(alpha):
+    # "0.2" and True used to be taken as 0.2 and 1.0, None reported as "got array(nan)"
+    with pytest.raises(TypeError, match=r"alpha \(flake roughness\) must be a real number"):
+        flake_reflection_brdf(0.5, 0.5, 0.0, alpha=alpha, n=1.5)
+
+
+def test_rejects_binder_thinner_than_air():
+    # n < 1 used to return nan (with a RuntimeWarning) where light from air is totally reflected
+    with pytest.raises(ValueError, match=r"n \(binder index\) must be > 1"):
+        flake_reflection_brdf(np.array([0.2, 0.9]), 0.5, 0.0, alpha=0.2, n=0.8)
