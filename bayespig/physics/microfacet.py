@@ -300,7 +300,7 @@ def flake_reflection_brdf(mu_i, mu_o, psi, *, alpha, n, distribution="ggx"):
     alpha : float or array_like
         Roughness of the flakes' orientation distribution [-] (> 0).
     n : float
-        Binder index [-].
+        Binder index [-] (> 1).
     distribution : {"ggx", "beckmann"}
 
     Returns
@@ -308,10 +308,18 @@ def flake_reflection_brdf(mu_i, mu_o, psi, *, alpha, n, distribution="ggx"):
     numpy.ndarray
         ``f_flake / c`` [1/sr], the arguments broadcast.
     """
-    alpha = np.asarray(alpha, dtype=float)
+    if alpha is None or isinstance(alpha, (str, bytes, bool, np.bool_)):
+        raise TypeError(f"alpha (flake roughness) must be a real number or an array of them, got {alpha!r}")
+    alpha = np.asarray(alpha)
+    if alpha.dtype.kind not in "iuf":
+        raise TypeError(f"alpha (flake roughness) must be a real number or an array of them, got {alpha!r}")
+    alpha = alpha.astype(float)
     if not (np.isfinite(alpha).all() and (alpha > 0).all()):
         raise ValueError(f"alpha must be > 0, got {alpha!r}")
     n_i, n = _check_indices(1.0, n)
+    if n < 1.0:
+        # light from air would be totally reflected at the surface for most angles (nan below)
+        raise ValueError(f"n (binder index) must be > 1 (a binder denser than air), got {n}")
     return _flake_reflection(_check_cosines("mu_i", mu_i), _check_cosines("mu_o", mu_o), np.cos(_check_psi(psi)),
                              alpha, n, _check_distribution(distribution))
 
