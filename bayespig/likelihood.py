@@ -499,10 +499,10 @@ class ForwardModel:
         if self.rough:
             self._rough_tables()
             if self.flakes:
-                hemispherical = sorted({film.instrument.name for film in self.problem.films
-                                        if any(ch.kind == "hemispherical" for ch in film.instrument.channels)})
+                hemispherical = [film.name for film in self.problem.films
+                                 if any(ch.kind == "hemispherical" for ch in film.instrument.channels)]
                 if hemispherical:
-                    raise ValueError(f"flakes are modelled for BRDF and 45/0 channels only; instrument(s) "
+                    raise ValueError(f"flakes are modelled for BRDF and 45/0 channels only; film(s) "
                                      f"{', '.join(map(repr, hemispherical))} have hemispherical channels")
             return
         self._film_tables = []

@@ -67,6 +67,10 @@ def add_infer_parser(subparsers):
                         help="binder index n of the films' surface: 'free' (inferred with the roughness, "
                              "needs --roughness free; prior normal 1.45 +- 0.05 truncated to 1.37-1.77); "
                              "default: the file's n (1.45), fixed")
+    parser.add_argument("--flakes", action="store_true",
+                        help="the films hold effect pigments (metal or pearlescent flakes): infer their lobe "
+                             "around the mirror direction, a flake reflectance per band and one flake "
+                             "roughness (needs --roughness free; BRDF or 45/0 channels)")
     parser.add_argument("--exclude-mirror", type=float, default=None, metavar="DEG",
                         help="drop the films' geometries within DEG degrees of the mirror direction")
     parser.add_argument("--max-angle", type=float, default=None, metavar="DEG",
@@ -168,6 +172,8 @@ def run_infer(args):
     if binder_index == "free" and roughness != "free":
         raise ValueError("--binder-index free needs --roughness free (the binder index is inferred with the "
                          "surface's roughness)")
+    if args.flakes and roughness != "free":
+        raise ValueError("--flakes needs --roughness free (the flakes' roughness is inferred with the surface's)")
     wavelengths, wavelength_range = _wavelengths_argument(args.wavelengths)
     overrides = {name: value for name, value in (("n_walkers", args.walkers),
                                                  ("n_ensembles", args.ensembles),
@@ -185,7 +191,8 @@ def run_infer(args):
         idata = infer(measurements, method=args.method, seed=args.seed,
                       g=args.g, eps=eps, progress=not args.no_progress, settings=settings,
                       substrate_sd=args.substrate_sd, noise_floor=noise_floor, roughness=roughness,
-                      binder_index=binder_index, exclude_mirror_deg=args.exclude_mirror, max_angle_deg=args.max_angle,
+                      binder_index=binder_index, flakes=args.flakes, exclude_mirror_deg=args.exclude_mirror,
+                      max_angle_deg=args.max_angle,
                       wavelengths=wavelengths, wavelength_range=wavelength_range)
         flagged = diagnose(idata, warn=False)
     for warning in caught:
@@ -218,6 +225,12 @@ def run_infer(args):
         low, median, high = np.quantile(n, [0.05, 0.5, 0.95])
         print(f"binder index n {median:.4g} [{low:.4g}, {high:.4g}] (90 %; "
               f"prior {json.loads(idata.posterior.attrs['binder_index_prior'])['prior']})")
+    if "flake_roughness" in idata.posterior:
+        alpha_f = np.asarray(idata.posterior["flake_roughness"].values, dtype=float).ravel()
+        low, median, high = np.quantile(alpha_f, [0.05, 0.5, 0.95])
+        print(f"flake roughness alpha_f {median:.4g} [{low:.4g}, {high:.4g}] (90 %; "
+              f"prior {json.loads(idata.posterior.attrs['flake_roughness_prior'])['prior']}); flake reflectance "
+              "per band in the summary")
     print(f"wrote {posterior_path} and {summary_path}")
     sys.stdout.flush()
     untestable = np.flatnonzero(~check["testable"] & ~check["flagged"])

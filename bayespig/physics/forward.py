@@ -816,8 +816,14 @@ def flake_brdf(theta_i, theta_o, delta_phi, *, flake_roughness, n=1.45, distribu
         The arguments broadcast [1/sr].
     """
     n, distribution = binder_index(n), _distribution(distribution)
-    theta_i, theta_o, delta_phi = np.broadcast_arrays(*(np.asarray(x, dtype=float)
-                                                        for x in (theta_i, theta_o, delta_phi)))
+    theta_i, theta_o = _validate_angle("theta_i", theta_i), _validate_angle("theta_o", theta_o)
+    delta_phi = _real_array("delta_phi", delta_phi)
+    _check_finite("delta_phi", delta_phi)
+    flake_roughness = _real_array("flake_roughness", flake_roughness)
+    bad = ~(np.isfinite(flake_roughness) & (flake_roughness > 0))
+    if bad.any():
+        raise ValueError(f"flake_roughness (the flakes' alpha) must be > 0 and finite, got {_first(flake_roughness, bad)}")
+    theta_i, theta_o, delta_phi = np.broadcast_arrays(theta_i, theta_o, delta_phi)
     return flake_reflection_brdf(np.cos(np.radians(theta_i)), np.cos(np.radians(theta_o)),
                                  np.radians(delta_phi) - np.pi, alpha=flake_roughness, n=n,
                                  distribution=distribution)

@@ -95,6 +95,7 @@ __all__ = [
     "record_eps_source",
     "residuals_in_eps",
     "spread_values",
+    "surface_parameters",
     "value_table",
     "wavelengths",
 ]
@@ -789,6 +790,35 @@ def card_factors(idata, probability=0.9):
         median, low, high = np.quantile(draws, [0.5, tail, 1.0 - tail])
         out.append({"card": str(card), "median": float(median), "low": float(low), "high": float(high),
                     "relative_sd": recorded.get("relative_sd")})
+    return out
+
+
+#: Posterior variables of the films' surface (one value for the set) and the attribute with their prior.
+SURFACE_PARAMETERS = (("roughness", "roughness_prior"), ("binder_index", "binder_index_prior"),
+                      ("flake_roughness", "flake_roughness_prior"))
+
+
+def surface_parameters(idata, probability=0.9):
+    """The surface's parameters of a posterior (roughness, binder index, flake roughness; those inferred).
+
+    Returns
+    -------
+    list of dict
+        Per parameter: ``variable``, ``long_name``, ``median``, ``low``, ``high`` (central
+        ``probability`` interval) and ``prior`` (its text, from the posterior's attributes).
+    """
+    tail = (1.0 - probability) / 2.0
+    attrs = _attrs(idata)
+    out = []
+    for variable, attribute in SURFACE_PARAMETERS:
+        if variable not in idata.posterior:
+            continue
+        draws = np.asarray(idata.posterior[variable].values, dtype=float).ravel()
+        median, low, high = np.quantile(draws, [0.5, tail, 1.0 - tail])
+        prior = (_json_attr(attrs.get(attribute)) or {}).get("prior", "")
+        out.append({"variable": variable,
+                    "long_name": idata.posterior[variable].attrs.get("long_name", variable),
+                    "median": float(median), "low": float(low), "high": float(high), "prior": prior})
     return out
 
 

@@ -71,7 +71,7 @@ def _parameters(idata):
             if k == 0:
                 continue  # tau is the first group's
             out.append((f"tau_{group}", posterior["tau_group"].isel(group=k).transpose("chain", "draw", "wavelength")))
-    for name in ("g", "eps"):
+    for name in ("g", "eps", "flake_reflectance"):
         if name in posterior:
             da = posterior[name]
             extra = [d for d in da.dims if d not in ("chain", "draw", "wavelength")]

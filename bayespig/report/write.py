@@ -389,7 +389,7 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         tau_groups = q.posterior_draws(idata, "tau_group")
         for k, group in enumerate(groups):
             bands[f"tau[{group}]"] = q.parameter_bands(tau_groups[..., k])
-    for name in ("g", "eps"):
+    for name in ("g", "eps", "flake_reflectance"):
         if name in idata.posterior:
             draws = q.posterior_draws(idata, name)
             bands[name] = q.parameter_bands(draws.reshape(draws.shape[0], wl.size, -1)[..., 0])
@@ -502,6 +502,8 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
                        "truth": None if g_truth is None else np.full(wl.size, float(g_truth))})
     if "eps" in bands:
         panels.append({"bands": bands["eps"], "label": "relative error eps", "log": True})
+    if "flake_reflectance" in bands:
+        panels.append({"bands": bands["flake_reflectance"], "label": "flake reflectance c", "log": True})
     add_figure("parameters", figs.parameter_figure(wl, panels),
                "Posterior median (line) with 50 % and 90 % central intervals (bands); + point fit"
                + (" (at g = 0, the start of the sampler)" if "g" in bands else "")
@@ -519,6 +521,14 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
         blocks.append(doc.table(["card", "f median [90 %]"],
                                 [[f["card"], f"{f['median']:.3f} [{f['low']:.3f}, {f['high']:.3f}]"]
                                  for f in factors]))
+    surface = q.surface_parameters(idata)
+    if surface:
+        blocks.append(doc.paragraph(
+            "Parameters of the films' surface, one value at every wavelength (inferred jointly with every "
+            "band's parameters; their uncertainty is in every band above)."))
+        blocks.append(doc.table(["parameter", "median [90 %]", "prior"],
+                                [[p["long_name"], f"{p['median']:.4g} [{p['low']:.4g}, {p['high']:.4g}]", p["prior"]]
+                                 for p in surface]))
     if extinction:
         unit = "1/um"
         text = (f"Film group '{extinction['group']}' has a known dry thickness H = "

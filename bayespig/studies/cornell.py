@@ -418,6 +418,10 @@ def cornell_report(study):
              "roughness alpha one parameter shared by all bands (log-uniform on 0.01..1), "
              + ("the binder index n another (normal 1.45 +- 0.05 truncated to 1.37..1.77; it sets the lobe's "
                 "height), " if settings.binder_index == "free" else "binder index fixed at 1.45, ")
+             + ("effect-pigment flakes: their lobe (`bayespig.physics.forward.flake_brdf`: mirror flakes in the "
+                "binder, GGX orientations of one flake roughness for all bands, log-uniform on 0.02..1, seen through "
+                "the surface) with a flake reflectance per band (log-uniform on 1e-5..1); the same fit without "
+                "flakes is shown for comparison; " if settings.flakes else "")
              + "a per-band noise floor "
              f"inferred (log-uniform), eps fixed at {EPS:g}: the joint roughness sampler needs a known eps, the "
              "floor takes the absolute noise of dark values and of the exact zeros, and a fixed eps keeps misfit "
@@ -443,9 +447,10 @@ def cornell_report(study):
                   f"{MIRROR_CUT_DEG:g}° from the mirror ({full['seconds']:.0f} s, steps per run "
                   f"{', '.join(map(str, full['n_steps']))}"
                   + (", **max_steps reached**" if full["max_steps_reached"] else "") + ").", ""]
-        r, n = full["roughness"], full["binder_index"]
+        r, n, r_f = full["roughness"], full["binder_index"], full.get("flake_roughness")
         lines += [f"**Roughness alpha (GGX): {_interval(*r, digits=4)}**"
                   + ("" if n is None else f"; **binder index n: {_interval(*n, digits=4)}**")
+                  + ("" if r_f is None else f"; **flake roughness: {_interval(*r_f, digits=4)}**")
                   + " (median [90 % interval]).", ""]
         for line in full["warnings"]:
             lines += [f"- warning: {line}"]
@@ -476,12 +481,26 @@ def cornell_report(study):
                   f"p-value of the chi-square (eps {EPS:g} and the floor; `bayespig.report.quantities."
                   "posterior_predictive_check`)."), ""]
         rows = []
+        flake = full.get("flake_reflectance")
+        plain = result.get("no_flakes")
         for i, w in enumerate(wl):
-            rows.append([f"{w:g}", _interval(full["a"][0, i], full["a"][1, i], full["a"][2, i]),
-                         "n/a" if full["noise_floor"] is None else f"{full['noise_floor'][i]:.2e}",
-                         _pct(full["residual"][i]), f"{check['p_value'][i]:.3g}", check["status"][i]])
-        lines += [_table(["band [nm]", "a median [90 %]", "noise floor [1/sr]", "median residual",
-                          "p", "model check"], rows), ""]
+            rows.append([f"{w:g}", _interval(full["a"][0, i], full["a"][1, i], full["a"][2, i])]
+                        + ([] if flake is None else [_interval(*flake[:, i], digits=4)])
+                        + ["n/a" if full["noise_floor"] is None else f"{full['noise_floor'][i]:.2e}",
+                           _pct(full["residual"][i])]
+                        + ([] if plain is None else [_pct(plain["residual"][i]), _interval(*plain["a"][:, i])])
+                        + [f"{check['p_value'][i]:.3g}", check["status"][i]])
+        lines += [_table(["band [nm]", "a median [90 %]"] + ([] if flake is None else ["flake reflectance c"])
+                         + ["noise floor [1/sr]", "median residual"]
+                         + ([] if plain is None else ["residual without flakes", "a without flakes"])
+                         + ["p", "model check"], rows), ""]
+        if plain is not None:
+            lines += [("Without flakes (the same fit, the surface alone): roughness "
+                       f"{_interval(*plain['roughness'], digits=4)}"
+                       + ("" if plain["binder_index"] is None else
+                          f", binder index {_interval(*plain['binder_index'], digits=4)}")
+                       + f"; {plain['seconds']:.0f} s"
+                       + ("; **max_steps reached**" if plain["max_steps_reached"] else "") + "."), ""]
         spectrum = f"cornell/{paint}_a.png"
         files[spectrum] = figs.to_png(_spectrum_figure(paint, result))
         lines += [f"![a(λ) of {paint}]({spectrum})", "",

@@ -249,7 +249,7 @@ def test_mirror_limit(distribution):
 def test_rejects_bad_alpha(alpha):
     with pytest.raises(ValueError, match="alpha must be > 0"):
         flake_reflection_brdf(0.5, 0.5, 0.0, alpha=alpha, n=1.5)
-    with pytest.raises(ValueError, match="alpha must be > 0"):
+    with pytest.raises(ValueError, match=r"flake_roughness \(the flakes' alpha\) must be > 0 and finite"):
         flake_brdf(30.0, 30.0, 180.0, flake_roughness=alpha)
 
 
