@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import sys
 import time
 import warnings
 from pathlib import Path
@@ -274,7 +275,7 @@ def _derive_subset_tables(full, subsets, over_n):
             derive_rough_table(table, _rough_instrument(subset))
 
 
-def cornell_study(folder=None, settings=None, paints=None, progress=None):
+def cornell_study(folder=None, settings=None, paints=None, progress=None, jobs=1):
     """Run the fits of every paint (see the module docstring).
 
     Parameters
@@ -285,50 +286,76 @@ def cornell_study(folder=None, settings=None, paints=None, progress=None):
     paints : sequence of str, optional
         File stems (default :data:`PAINTS`).
     progress : callable, optional
-        Called with a line of text before each fit.
+        Called with a line of text before each fit (with ``jobs > 1`` the workers print their
+        lines to standard error themselves).
+    jobs : int
+        Paints fitted at once, each in its own process (1: one after the other, here). Every
+        fit is seeded by ``settings.seed`` alone, so the results do not depend on ``jobs``.
 
     Returns
     -------
     dict
         ``folder``, ``settings``, ``paints``: per paint ``full``, ``smooth``, ``far``, ``near``
-        (:func:`fit_summary`), ``overlap`` (bool per subset band), ``counts`` (geometries of
-        each fit) and ``seconds``.
+        (and ``no_flakes`` with ``settings.flakes``) (:func:`fit_summary`), ``overlap`` (bool per
+        subset band), ``counts`` (geometries of each fit) and ``seconds``.
     """
+    from .._pool import executor_or_local_pool
+
     folder = Path(folder) if folder is not None else default_cornell_path()
     settings = settings or CornellStudySettings()
+    paints = list(paints or PAINTS)
+    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+        raise ValueError(f"jobs must be a positive integer, got {jobs!r}")
     started = time.perf_counter()
-    say = ((lambda message: progress(f"[{time.perf_counter() - started:.0f} s] {message}")) if progress
-           else (lambda message: None))
     out = {"folder": folder, "settings": settings, "paints": {}}
-    for paint in paints or PAINTS:
-        measurements = _thin_geometries(read_measurements(folder / f"{paint}.astm", opaque=True),
-                                        settings.max_geometries, settings.incidences_deg)
-        full = select_measurements(measurements, exclude_mirror_deg=MIRROR_CUT_DEG)
-        far = select_measurements(measurements, exclude_mirror_deg=SUBSET_SPLIT_DEG,
-                                  max_angle_deg=SUBSET_MAX_ANGLE_DEG)
-        near = mirror_band_subset(measurements, MIRROR_CUT_DEG, SUBSET_SPLIT_DEG, SUBSET_MAX_ANGLE_DEG)
-        result = {"counts": {"all": _n_geometries(measurements), "full": _n_geometries(full),
-                             "far": _n_geometries(far), "near": _n_geometries(near)}}
-        bands = None if settings.full_bands is None else list(settings.full_bands)
-        surface = {"roughness": "free", "binder_index": settings.binder_index, "flakes": settings.flakes}
-        say(f"{paint}: full fit, {result['counts']['full']} geometries, roughness"
-            + (" and binder index" if settings.binder_index else "") + " free"
-            + (", with flakes" if settings.flakes else ""))
-        result["full"] = _infer(full, settings, wavelengths=bands, **surface)
-        if settings.flakes:
-            say(f"{paint}: full fit without flakes, for comparison")
-            result["no_flakes"] = _infer(full, settings, wavelengths=bands, **{**surface, "flakes": False})
-        _derive_subset_tables(full, (far, near), settings.binder_index == "free")
-        subset_bands = None if settings.subset_bands is None else list(settings.subset_bands)
-        for name in ("far", "near"):
-            say(f"{paint}: subset '{name}', {result['counts'][name]} geometries")
-            result[name] = _infer(far if name == "far" else near, settings, wavelengths=subset_bands, **surface)
-        say(f"{paint}: smooth model at {', '.join(f'{b:g}' for b in settings.smooth_bands)} nm")
-        result["smooth"] = _infer(full, settings, roughness=0.0, wavelengths=list(settings.smooth_bands))
-        result["overlap"] = interval_overlap(result["far"]["a"][[0, 2]], result["near"]["a"][[0, 2]])
-        out["paints"][paint] = result
+    if jobs == 1 or len(paints) == 1:
+        for paint in paints:
+            out["paints"][paint] = _study_paint(folder, settings, paint, progress, started)
+    else:
+        with executor_or_local_pool(None, max_workers=min(jobs, len(paints))) as pool:
+            futures = {paint: pool.submit(_study_paint, folder, settings, paint, _print_progress if progress else None,
+                                          None) for paint in paints}
+            out["paints"] = {paint: future.result() for paint, future in futures.items()}
     out["seconds"] = time.perf_counter() - started
     return out
+
+
+def _print_progress(message):
+    """A worker's progress line (standard error)."""
+    print(message, file=sys.stderr, flush=True)
+
+
+def _study_paint(folder, settings, paint, progress, started):
+    """Every fit of one paint (:func:`cornell_study`)."""
+    started = time.perf_counter() if started is None else started
+    say = ((lambda message: progress(f"[{time.perf_counter() - started:.0f} s] {message}")) if progress
+           else (lambda message: None))
+    measurements = _thin_geometries(read_measurements(folder / f"{paint}.astm", opaque=True),
+                                    settings.max_geometries, settings.incidences_deg)
+    full = select_measurements(measurements, exclude_mirror_deg=MIRROR_CUT_DEG)
+    far = select_measurements(measurements, exclude_mirror_deg=SUBSET_SPLIT_DEG,
+                              max_angle_deg=SUBSET_MAX_ANGLE_DEG)
+    near = mirror_band_subset(measurements, MIRROR_CUT_DEG, SUBSET_SPLIT_DEG, SUBSET_MAX_ANGLE_DEG)
+    result = {"counts": {"all": _n_geometries(measurements), "full": _n_geometries(full),
+                         "far": _n_geometries(far), "near": _n_geometries(near)}}
+    bands = None if settings.full_bands is None else list(settings.full_bands)
+    surface = {"roughness": "free", "binder_index": settings.binder_index, "flakes": settings.flakes}
+    say(f"{paint}: full fit, {result['counts']['full']} geometries, roughness"
+        + (" and binder index" if settings.binder_index else "") + " free"
+        + (", with flakes" if settings.flakes else ""))
+    result["full"] = _infer(full, settings, wavelengths=bands, **surface)
+    if settings.flakes:
+        say(f"{paint}: full fit without flakes, for comparison")
+        result["no_flakes"] = _infer(full, settings, wavelengths=bands, **{**surface, "flakes": False})
+    _derive_subset_tables(full, (far, near), settings.binder_index == "free")
+    subset_bands = None if settings.subset_bands is None else list(settings.subset_bands)
+    for name in ("far", "near"):
+        say(f"{paint}: subset '{name}', {result['counts'][name]} geometries")
+        result[name] = _infer(far if name == "far" else near, settings, wavelengths=subset_bands, **surface)
+    say(f"{paint}: smooth model at {', '.join(f'{b:g}' for b in settings.smooth_bands)} nm")
+    result["smooth"] = _infer(full, settings, roughness=0.0, wavelengths=list(settings.smooth_bands))
+    result["overlap"] = interval_overlap(result["far"]["a"][[0, 2]], result["near"]["a"][[0, 2]])
+    return result
 
 
 # ------------------------------------------------------------------------------------------

@@ -112,3 +112,31 @@ def test_tiny_study_report_structure(tiny_study, tmp_path):
     assert said == expected.tolist()
     n = int(expected.sum())
     assert f"({n} of 2 bands" in text
+
+
+def test_the_paints_fitted_at_once_give_the_same_study():
+    if not (CORNELL / "krylon_blue.astm").exists():
+        pytest.skip(f"Cornell data not found at {CORNELL} (set BAYESPIG_CORNELL)")
+    serial = cornell_study(CORNELL, settings=TINY)
+    parallel = cornell_study(CORNELL, settings=TINY, jobs=2)
+    assert list(parallel["paints"]) == list(serial["paints"]) == ["garnet_red", "krylon_blue"]
+    for paint, result in serial["paints"].items():
+        for fit in ("full", "no_flakes", "far", "near", "smooth"):
+            np.testing.assert_array_equal(parallel["paints"][paint][fit]["a"], result[fit]["a"])
+        np.testing.assert_array_equal(parallel["paints"][paint]["full"]["flake_reflectance"],
+                                      result["full"]["flake_reflectance"])
+
+
+def test_the_report_gives_the_flakes_and_the_fit_without_them(tiny_study, tmp_path):
+    text = write_cornell_report(tiny_study, tmp_path / "cornell.md").read_text()
+    full = tiny_study["paints"]["garnet_red"]["full"]
+    assert full["flake_roughness"] is not None and full["flake_reflectance"].shape == (3, 2)
+    assert "**flake roughness: " in text
+    assert "| flake reflectance c |" in text and "| residual without flakes |" in text
+    assert "Without flakes (the same fit, the surface alone): roughness " in text
+
+
+@pytest.mark.parametrize("jobs", [0, -1, 1.5, True])
+def test_bad_jobs_are_refused(jobs):
+    with pytest.raises(ValueError, match=f"jobs must be a positive integer, got {jobs!r}"):
+        cornell_study(CORNELL, settings=TINY, jobs=jobs)
