@@ -17,6 +17,10 @@ surface") is tabulated over ``(alpha, a)``; the first-surface lobe is not:
 So a table returns the *total* value (body plus lobe), with ``part="body"`` / ``"surface"`` for
 either alone.
 
+A film with effect-pigment flakes adds ``c`` times their lobe
+(:meth:`RoughLookupTable.flake_lobe`: :func:`bayespig.physics.microfacet.flake_reflection_brdf`
+at the BRDF channels, analytic like the surface's lobe; none for hemispherical channels).
+
 Axes and interpolation
 ----------------------
 ``log q = log(f_body / (1 - a))`` (the opaque slice of :mod:`bayespig.table`; ``q`` is smooth

@@ -19,6 +19,14 @@ basis (product integration), the same substrate law; the BRDF then includes the 
 lobe (``part="total"``; :func:`first_surface_brdf`). ``roughness = 0`` runs the smooth code
 unchanged.
 
+Effect pigments (metal or pearlescent flakes) add a coloured lobe around the mirror direction
+that neither the body nor the surface has: :func:`flake_brdf` is its shape per unit flake
+reflectance (mirror flakes in the binder with GGX orientations, seen through the surface;
+:func:`bayespig.physics.microfacet.flake_reflection_brdf`), added by the inference's forward model
+with a reflectance per band (``infer(..., flakes=True)``). It is a single-bounce term outside the
+layer solve: the body's light reflected by flakes, and the flakes' shading of the body, are not
+modelled.
+
 Angles are in degrees, in air: ``theta_i`` incidence, ``theta_o`` viewing and
 ``delta_phi`` the azimuth between the plane of incidence and the plane of viewing,
 ``delta_phi = 180`` on the specular side, ``0`` back towards the source.
