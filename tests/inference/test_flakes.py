@@ -166,3 +166,22 @@ def test_the_report_shows_the_surface_and_the_flakes(metallic_idata, tmp_path):
     row = next(line for line in text.splitlines() if line.startswith("| GGX roughness alpha of the effect-pigment"))
     assert f"{alpha_f[0]:.4g} \\[{alpha_f[1]:.4g}, {alpha_f[2]:.4g}\\]" in row
     assert "| GGX roughness alpha of the films' top surface |" in text
+
+
+def test_cli_infers_the_flakes_and_prints_their_roughness(metallic_set, tmp_path, capsys):
+    from bayespig.inference import load_inference
+
+    path = tmp_path / "metallic.csv"
+    metallic_set.to_csv(path)
+    status = cli.main(["infer", str(path), "--out", str(tmp_path / "out"), "--eps", str(EPS_TRUE),
+                       "--roughness", "free", "--flakes", "--no-progress"])
+    out = capsys.readouterr().out
+    assert status == 0
+    line = next(row for row in out.splitlines() if row.startswith("flake roughness alpha_f "))
+    printed = [float(x) for x in line.split(" (90 %")[0][len("flake roughness alpha_f "):]
+               .replace("[", "").replace("]", "").replace(",", "").split()]
+    stored = load_inference(tmp_path / "out" / "posterior.nc")
+    expected = np.quantile(stored.posterior["flake_roughness"].values.ravel(), [0.5, 0.05, 0.95])
+    np.testing.assert_allclose(printed, expected, rtol=5e-4)  # 4 significant digits printed
+    header = (tmp_path / "out" / "summary.csv").read_text().splitlines()[0].split(",")
+    assert "flake_reflectance_median" in header
