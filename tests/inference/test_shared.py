@@ -9,7 +9,7 @@ from scipy import stats
 from bayespig.data import simulate
 from bayespig.inference import InferenceSettings, infer_problem
 from bayespig.inference.card_factors import CardFactorLogPosterior, CardFactors, card_indices
-from bayespig.inference.shared import JointLogPosterior, SharedParameter
+from bayespig.inference.shared import JointLogPosterior, SharedParameter, adaptation_settled
 from bayespig.likelihood import ForwardModel, Priors, Problem
 
 from .common import MC_Z
@@ -123,6 +123,27 @@ def test_residual_coordinates_invert_and_the_regression_recovers_a_linear_depend
     np.testing.assert_allclose(refit.u_of(centre + phi @ slope.T, phi)[:, :4], 0.0, atol=1e-12)
     with pytest.raises(ValueError, match=r"sensitivity must have shape \(4, 2\)"):
         JointLogPosterior(model, theta_hat, post.specs, Priors(), EPS, sensitivity=sensitivity[:2])
+
+
+def test_an_adaptation_run_counts_as_settled_only_without_drift_or_contraction():
+    """adaptation_settled: stationary draws settle; a mean that travels by 1 sd between the
+    halves, or an ensemble whose spread halves, does not."""
+    rng = np.random.default_rng(3)
+    shape = (4, 16, 40)  # ensembles, walkers, steps
+    block = rng.normal(0.0, 1.0, shape + (3,))
+    stationary = np.concatenate([block, rng.normal(0.0, 1.0, shape + (2,))], axis=-1)
+    phi = slice(3, 5)
+    assert adaptation_settled(stationary, phi)
+    travelling = stationary.copy()
+    travelling[..., 3] += np.linspace(0.0, 3.0, shape[2])  # ~1 sd of the whole run between the halves' means
+    assert not adaptation_settled(travelling, phi)
+    shrinking = stationary.copy()
+    shrinking[:, :, shape[2] // 2:, 4] *= 0.5
+    assert not adaptation_settled(shrinking, phi)
+    # the blocks' own coordinates do not count
+    moving_block = stationary.copy()
+    moving_block[..., 0] += np.linspace(0.0, 30.0, shape[2])
+    assert adaptation_settled(moving_block, phi)
 
 
 def test_the_dense_check_completes_a_many_parameter_run_the_stored_draws_cannot():
