@@ -11,7 +11,10 @@ roughness, the binder index, the flakes and a per-band noise floor inferred: the
 before session 11, ``MAX_ADAPTATION_ROUNDS = 1``) and once with the repeated adaptation (the
 default). Printed per variant: wall time, steps of the run proper, whether it was capped, the
 share of the shared block's proposals accepted, and the ESS (arviz, bulk) of the shared
-parameters and of ``a`` per band.
+parameters and of ``a`` per band. Then the Revigo card-factor runs of films 07A, 02B and 14B
+(``infer(..., method="method4", eps=0.01, substrate_sd=0.1)``, SCI; ~30 s; data in
+``../shared/data/revigo``), whose first adaptation settles: steps, time, and the smallest ESS
+and largest R-hat of the card factors.
 """
 
 import os
@@ -27,6 +30,7 @@ import bayespig
 from bayespig.inference import InferenceSettings
 from bayespig.inference import shared
 
+REVIGO = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "revigo"
 DATA = Path(os.environ.get("BAYESPIG_CORNELL", Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "cornell"))
 
 
@@ -73,6 +77,29 @@ def main():
         print(f"{label}: {elapsed:.0f} s, {steps} steps{' (capped)' if capped else ''}, shared moves accepted "
               f"{100 * acc:.1f} %; ESS roughness {ess['roughness'][0]:.0f}, binder index {ess['binder_index'][0]:.0f}, "
               f"flake roughness {ess['flake_roughness'][0]:.0f}, a " + " / ".join(f"{v:.0f}" for v in ess["a"]))
+
+    revigo = REVIGO / "revigo-aggregated-palette-spectral-data.txt"
+    if not revigo.exists():
+        sys.exit(f"the Revigo part needs {revigo}")
+    from bayespig.data.spectral_table import read_revigo
+
+    films = read_revigo(revigo, specular="included")
+    for film in ("07A", "02B", "14B"):
+        start = time.perf_counter()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            idata = bayespig.infer(films[film], method="method4", eps=0.01, seed=0, progress=False,
+                                   settings=InferenceSettings(target_ess=400, draws_per_chain=128),
+                                   substrate_sd=0.1)
+        elapsed = time.perf_counter() - start
+        f = idata.posterior["r_s_factor"].values
+        f = f.reshape(f.shape[0], f.shape[1], -1)
+        ess = min(float(az.ess(f[:, :, j])) for j in range(f.shape[2]))
+        rhat = max(float(az.rhat(f[:, :, j])) for j in range(f.shape[2]))
+        capped = any("max_steps" in str(w.message) for w in caught)
+        steps = int(np.max(idata.sample_stats["n_steps"].values))
+        print(f"Revigo {film}, card factors: {steps} steps{' (capped)' if capped else ''}, {elapsed:.1f} s, "
+              f"smallest factor ESS {ess:.0f}, largest R-hat {rhat:.3f}")
 
 
 saved_default = shared.MAX_ADAPTATION_ROUNDS

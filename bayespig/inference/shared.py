@@ -157,21 +157,20 @@ ADAPTATION_STEPS = 300
 #: Most adaptation runs of :func:`sample_blocks`. A pilot at the nominal shared values far from
 #: their posterior (a Cornell paint: the pilot's binder index 1.45 and flake roughness 0.3, the
 #: posterior's 1.52 and 0.79) makes the first adaptation a journey: its regression then
-#: describes the journey, not the posterior's correlations, and the run proper mixes ~30x more
-#: slowly (Krylon blue, 450/550/650 nm with flakes: shared moves accepted 1.5 % of the time, ESS
-#: of the roughness 37 in 1500 steps, against 16 % and ~3400 after further rounds;
-#: ``python benchmarks/joint_adaptation.py``). So the adaptation is repeated from its own end,
-#: each repeat regressing on its second half, until one run is settled
-#: (:func:`adaptation_settled`).
+#: describes the journey, not the posterior's correlations, and the run proper mixes slowly
+#: (``python benchmarks/joint_adaptation.py``, Krylon blue at 450/550/650 nm with flakes: with one
+#: adaptation run 0.5 % of the shared moves accepted and the run capped at 4000 steps, ESS of the
+#: roughness 216; with the rounds 16.3 %, converged in 1374 steps, ESS 3014). So the adaptation
+#: is repeated from its own end, each repeat regressing on its second half, until two runs in a
+#: row are settled (:func:`adaptation_settled`; one when the first is).
 MAX_ADAPTATION_ROUNDS = 4
 #: Shift of a shared coordinate's mean between the two halves of an adaptation run, in sds of
 #: the run, above which the run has not settled. A stationary run's halves differ by about
 #: ``sqrt(2 / ESS_half)`` sds (0.3 for ESS 25); a spurious extra round costs only its steps.
 ADAPTATION_DRIFT = 0.5
 #: Ratio of a shared coordinate's sd over the second half of an adaptation run to that over the
-#: first below which the ensemble is still contracting (not settled). Measured: Krylon blue
-#: with flakes 0.76-0.80 in the first round, 0.97-1.03 in the second; Revigo 02B with card
-#: factors 1.03-1.06 in the first (settled at once).
+#: first below which the ensemble is still contracting (not settled); a stationary run's ratio
+#: scatters by about ``1 / sqrt(ESS_half)`` around 1.
 ADAPTATION_CONTRACTION = 0.9
 
 
@@ -824,22 +823,18 @@ def sample_blocks(model, specs, draws, settings, joint_seed, start_seed, priors=
     adapt_steps = max(ADAPTATION_STEPS, used.steps_kept)
     adapt_settings = dataclasses.replace(used, min_steps=adapt_steps, max_steps=adapt_steps, check_interval=adapt_steps)
     walkers = start
-    # the first round's seed is the one a single adaptation has always had (the same draws when
-    # it settles); further rounds take further children of the same parent
-    round_seeds = [adapt_seed]
     settled_rounds = 0
     for round_index in range(MAX_ADAPTATION_ROUNDS):
-        if round_index:
-            round_seeds += parent_seed.spawn(1)
-        round_seed = round_seeds[-1]
+        # the first round's seed is the one a single adaptation has always had (the same draws
+        # when it settles); further rounds take further children of the same parent
+        round_seed = adapt_seed if round_index == 0 else parent_seed.spawn(1)[0]
         adaptation = run_joint(joint, adapt_settings, round_seed, walkers)
         # (ensemble, walker, step, n_dim): the stored draws of every walker in time order
         history = adaptation["theta"].reshape(used.n_ensembles, used.n_walkers, used.steps_kept, joint.n_dim)
         settled = adaptation_settled(history, joint.shared_slice)
         adapted = history if settled else history[:, :, history.shape[2] // 2:]
         # a first round that settles is enough; after a journey, two settled rounds in a row
-        # (the first one's regression still carries some of it: measured on the Krylon blue,
-        # shared moves accepted 9 % after one settled round, 18 % after two)
+        # (the first settled one's regression still carries some of the journey)
         settled_rounds = settled_rounds + 1 if settled else 0
         done = settled_rounds >= (1 if round_index == 0 else 2) or round_index == MAX_ADAPTATION_ROUNDS - 1
         theta_hat, sensitivity = joint.regression(adapted.reshape(-1, joint.n_dim))
@@ -849,7 +844,6 @@ def sample_blocks(model, specs, draws, settings, joint_seed, start_seed, priors=
         if done:
             break
     run = run_joint(joint, used, joint_seed, walkers)
-    run["adaptation_rounds"] = round_index + 1
     return run, used, joint
 
 
