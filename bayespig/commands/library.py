@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import atomic_path
+from ..library.build import DEFAULT_NOISE_SCALE, NOISE_SCALES
 from ._arguments import add_input_argument, add_output_argument, add_substrate_argument, add_verbosity_arguments
 
 __all__ = ["add_library_parsers", "recipe_argument", "spectrum_argument"]
@@ -131,6 +132,9 @@ def add_library_parsers(subparsers):
     build.add_argument("--concentration-sd", type=float, default=None, metavar="SD",
                        help="the recipes' uncertainty: a factor on the concentration of each film's minor pigments "
                        "fixed from an earlier stage, log f ~ N(0, SD^2) (e.g. 0.3; default: the recipes as given)")
+    build.add_argument("--noise-scale", choices=NOISE_SCALES, default=DEFAULT_NOISE_SCALE,
+                       help="what the relative error eps is relative to: the measured value (default) or the "
+                       "predicted one (eq. 7); they differ on films the model cannot reproduce")
     add_verbosity_arguments(build)
     build.set_defaults(func=run_library_build)
 
@@ -195,6 +199,8 @@ def add_library_parsers(subparsers):
     study.add_argument("--films", default=None, help="only these targets (comma-separated ids)")
     study.add_argument("--series", default=None, help="only the targets of these series (comma-separated, e.g. 06,12)")
     study.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    study.add_argument("--noise-scale", choices=NOISE_SCALES, default=DEFAULT_NOISE_SCALE,
+                       help="every build's noise scale, as 'bayespig library build --noise-scale' (default measured)")
     add_verbosity_arguments(study)
     study.set_defaults(func=run_colour_prediction)
 
@@ -220,7 +226,8 @@ def run_library_build(args):
             raise ValueError(f"--films: {missing[0]!r} is not a film of {path}")
         sets = {f: sets[f] for f in wanted}
     library = build_library(sets, model=args.model, seed=args.seed, progress=_say(args) or False,
-                            substrate_sd=substrate_sd, concentration_sd=concentration_sd)
+                            substrate_sd=substrate_sd, concentration_sd=concentration_sd,
+                            noise_scale=args.noise_scale)
     library.save(args.out)
     print(f"wrote {args.out}: {len(library.pigments)} pigments ({', '.join(library.pigments)}), "
           f"{library.wavelength_nm.size} wavelengths, model {library.model}"
@@ -320,7 +327,10 @@ def run_colour_prediction(args):
         if not films:
             raise ValueError(f"--series {args.series}: no mixture film of series 01-15 among them")
         command += f" --series {','.join(series)}"
-    study = colour_prediction_study(path, films=films, seed=args.seed, progress=_say(args))
+    if args.noise_scale != DEFAULT_NOISE_SCALE:
+        command += f" --noise-scale {args.noise_scale}"
+    study = colour_prediction_study(path, films=films, seed=args.seed, progress=_say(args),
+                                    noise_scale=args.noise_scale)
     text = colour_prediction_report(study, command=command)
     with atomic_path(args.report) as tmp:
         Path(tmp).write_text(text, encoding="utf-8")

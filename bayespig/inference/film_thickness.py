@@ -55,6 +55,10 @@ class FilmThickness(SharedParameter):
         Prior sd of ``log h`` of a film of unknown thickness [-].
     measured_sd : float
         Prior sd of ``log h`` of a film with a measured thickness [-].
+    start : sequence of float, optional
+        ``log h`` per film where the run starts (the pilot's and the walkers' ``nominal``;
+        e.g. a least-squares fit, :func:`bayespig.library.build.joint_least_squares_start`),
+        clipped into the prior's box; default the prior's centre. The prior does not change.
 
     Raises
     ------
@@ -72,7 +76,7 @@ class FilmThickness(SharedParameter):
     attribute = "film_thickness_prior"
     prior_scale = "log"
 
-    def __init__(self, films, measured=None, relative_sd=RELATIVE_SD, measured_sd=MEASURED_RELATIVE_SD):
+    def __init__(self, films, measured=None, relative_sd=RELATIVE_SD, measured_sd=MEASURED_RELATIVE_SD, start=None):
         films = tuple(str(f) for f in films)
         if not films:
             raise ValueError("films must name at least one film")
@@ -95,7 +99,15 @@ class FilmThickness(SharedParameter):
         self.sd = np.where(known, self.measured_sd, self.relative_sd)
         self.lower = self.mean - THICKNESS_PRIOR_SDS * self.sd
         self.upper = self.mean + THICKNESS_PRIOR_SDS * self.sd
-        self.nominal = self.mean.copy()
+        if start is None:
+            self.nominal = self.mean.copy()
+        else:
+            start = np.asarray(start, dtype=float)
+            if start.shape != (len(films),) or not np.isfinite(start).all():
+                raise ValueError(f"start must be one finite log h per film ({len(films)}), got {start!r}")
+            # strictly inside the box: the walkers' start ball must not leave it
+            margin = 1e-3 * self.sd
+            self.nominal = np.clip(start, self.lower + margin, self.upper - margin)
         self.start_sd = 0.01 * self.sd
 
     def log_prior(self, x):

@@ -34,7 +34,7 @@ from .. import colorimetry
 from .._pool import executor_or_local_pool
 from ..data import MeasurementSet
 from ..inference.settings import InferenceSettings
-from .build import _base_pigments, _portable as portable_fields, build_library
+from .build import DEFAULT_NOISE_SCALE, _base_pigments, _portable as portable_fields, build_library, check_noise_scale
 from .match import match_paint
 from .predict import DEFAULT_LEVEL, joint_constants, model_error_from_residuals, predict_reflectance
 from .recipes import film_recipes
@@ -160,10 +160,10 @@ def _fit_thickness(library, recipe, constants, instrument, pairs):
 
 def _build(task):
     """A library of the films ``films`` (a process task), on a base library when given."""
-    sets, films, model, seed, base, settings = task
+    sets, films, model, seed, base, settings, noise_scale = task
     sets = _sets({f: sets[f] for f in films})
     return build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base,
-                         settings=settings)
+                         settings=settings, noise_scale=noise_scale)
 
 
 def predict_held_out(library, measurements, recipe, *, model, film_id, seed=0, n_draws=N_DRAWS, started=None):
@@ -213,11 +213,11 @@ def predict_held_out(library, measurements, recipe, *, model, film_id, seed=0, n
 
 def _predict_film(task):
     """Build the leave-one-out library of one target and predict it (a process task)."""
-    sets, film_id, model, seed, n_draws, films, base, settings = task
+    sets, film_id, model, seed, n_draws, films, base, settings, noise_scale = task
     started = time.perf_counter()
     sets = _sets({f: sets[f] for f in (*films, film_id)})
     library = build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base,
-                            settings=settings)
+                            settings=settings, noise_scale=noise_scale)
     recipe = film_recipes({film_id: sets[film_id]})[film_id]
     return predict_held_out(library, sets[film_id], recipe, model=model, film_id=film_id, seed=seed,
                             n_draws=n_draws, started=started)
@@ -234,7 +234,8 @@ def _sets(portable):
 
 
 def leave_one_out(measurements, *, targets=None, models=("radiative-transfer",), seed=0, executor=None,
-                  progress=None, n_draws=N_DRAWS, settings=LOO_SETTINGS, base_pigments=None):
+                  progress=None, n_draws=N_DRAWS, settings=LOO_SETTINGS, base_pigments=None,
+                  noise_scale=DEFAULT_NOISE_SCALE):
     """Every target film predicted by a library built without it (see the module docstring).
 
     Parameters
@@ -255,6 +256,8 @@ def leave_one_out(measurements, *, targets=None, models=("radiative-transfer",),
         Sampler settings of every build (default :data:`LOO_SETTINGS`).
     base_pigments : sequence of str, optional
         As for :func:`bayespig.build_library` (default: present in >= a quarter of the films).
+    noise_scale : {"measured", "model"}
+        As for :func:`bayespig.build_library`: every build's.
 
     Returns
     -------
@@ -262,6 +265,7 @@ def leave_one_out(measurements, *, targets=None, models=("radiative-transfer",),
         ``(predictions, info)``: the :class:`FilmPrediction` of every (model, target), and a dict
         (base pigments and films, seconds).
     """
+    noise_scale = check_noise_scale(noise_scale)
     sets = dict(measurements)
     recipes = film_recipes(sets)
     base = tuple(_base_pigments(recipes) if base_pigments is None else base_pigments)
@@ -278,7 +282,7 @@ def leave_one_out(measurements, *, targets=None, models=("radiative-transfer",),
     with executor_or_local_pool(executor) as pool:
         bases = {}
         if base_films:
-            futures = {m: pool.submit(_build, (portable, base_films, m, seed, None, settings)) for m in models}
+            futures = {m: pool.submit(_build, (portable, base_films, m, seed, None, settings, noise_scale)) for m in models}
             bases = {m: future.result() for m, future in futures.items()}
             say(f"base libraries ({', '.join(base) or 'none'} from {', '.join(base_films)}) built: "
                 f"{time.perf_counter() - started:.0f} s")
@@ -287,16 +291,16 @@ def leave_one_out(measurements, *, targets=None, models=("radiative-transfer",),
             for f in targets:
                 base_only, others = plans[f]
                 if others:  # the target adds pigments to the base: share the base library
-                    tasks.append((portable, f, m, seed, n_draws, others, bases[m], settings))
+                    tasks.append((portable, f, m, seed, n_draws, others, bases[m], settings, noise_scale))
                 else:  # a base-only target: its library is built without it from the others
-                    tasks.append((portable, f, m, seed, n_draws, base_only, None, settings))
+                    tasks.append((portable, f, m, seed, n_draws, base_only, None, settings, noise_scale))
         futures = [pool.submit(_predict_film, task) for task in tasks]
         for i, future in enumerate(futures, 1):
             p = future.result()
             results.append(p)
             say(f"[{i}/{len(tasks)}] {p.model} {p.film_id}: ΔE00 " + " / ".join(f"{d:.2f}" for d in p.delta_E)
                 + f" ({', '.join(p.cards)}), {p.seconds:.0f} s; {time.perf_counter() - started:.0f} s in all")
-    return tuple(results), {"base_pigments": list(base), "base_films": base_films,
+    return tuple(results), {"base_pigments": list(base), "base_films": base_films, "noise_scale": noise_scale,
                             "seconds": time.perf_counter() - started}
 
 
@@ -357,7 +361,8 @@ def cross_validate(library, measurements, *, seed=0, executor=None, progress=Non
     """
     predictions, _ = leave_one_out(measurements, targets=targets, models=(library.model,), seed=seed,
                                    executor=executor, progress=progress, settings=settings,
-                                   base_pigments=library.provenance.get("base_pigments"))
+                                   base_pigments=library.provenance.get("base_pigments"),
+                                   noise_scale=library.provenance.get("noise_scale", "model"))
     if len(predictions) < 2:
         raise ValueError("cross-validation needs at least two mixture films")
     covariance = model_error_from_residuals(np.concatenate([p.residuals for p in predictions]))

@@ -49,6 +49,7 @@ import re
 import numpy as np
 
 from ..data.spectral_table import read_revigo
+from ..library.build import DEFAULT_NOISE_SCALE
 from ..library.recipes import film_recipes
 from ..library.validation import LOO_SETTINGS, N_DRAWS, coverage, leave_one_out
 
@@ -124,7 +125,7 @@ class ColourPredictionStudy:
 
 
 def colour_prediction_study(path, *, films=None, models=MODELS, seed=0, executor=None, progress=None,
-                            n_draws=N_DRAWS, settings=LOO_SETTINGS):
+                            n_draws=N_DRAWS, settings=LOO_SETTINGS, noise_scale=DEFAULT_NOISE_SCALE):
     """Run the leave-one-film-out study (see the module docstring).
 
     Parameters
@@ -142,6 +143,8 @@ def colour_prediction_study(path, *, films=None, models=MODELS, seed=0, executor
     n_draws : int
     settings : InferenceSettings
         Sampler settings of every build.
+    noise_scale : {"measured", "model"}
+        What every build's relative error is relative to (:func:`bayespig.build_library`).
 
     Returns
     -------
@@ -155,7 +158,7 @@ def colour_prediction_study(path, *, films=None, models=MODELS, seed=0, executor
         raise ValueError(f"films: {unknown[0]!r} is not a film of {path}")
     predictions, info = leave_one_out(sets, targets=targets, models=models, seed=seed, executor=executor,
                                       progress=progress, n_draws=n_draws, settings=settings,
-                                      base_pigments=(WHITE, BLACK))
+                                      base_pigments=(WHITE, BLACK), noise_scale=noise_scale)
     wl = np.asarray(sets[targets[0]].wavelength_nm, dtype=float) if targets else np.array([])
     counts, inside, radius = coverage(predictions, wl, level=LEVEL, seed=seed)
     record = {"seed": seed, "n_draws": n_draws, "instrument": INSTRUMENT, "level": LEVEL, "models": list(models),
@@ -243,6 +246,9 @@ def colour_prediction_report(study, *, command="bayespig colour-prediction"):
             dEs.append(p.match_delta_E)
         lines.append(f"| {model} | {_median(errors):.3f} | {_median(dEs):.2f} |")
     s = study.settings
+    scale = s.get("noise_scale", "model")
     lines += ["", f"Settings: seed {s['seed']}, {s['n_draws']} draws per prediction, instrument {s['instrument']}, "
-              f"level {s['level']}.", ""]
+              f"level {s['level']}; every build's relative error eps relative to the "
+              f"{'measured' if scale == 'measured' else 'predicted (eq. 7)'} value (noise scale {scale!r}, "
+              "`bayespig.build_library`).", ""]
     return "\n".join(lines)

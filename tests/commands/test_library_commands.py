@@ -86,3 +86,16 @@ def test_library_build_refuses_a_bad_substrate_sd_before_reading(tmp_path, capsy
     assert main(["library", "build", str(source), "--out", str(out), "--substrate-sd", value]) == 2
     assert capsys.readouterr().err.strip() == f"bayespig: error: {message}"
     assert not out.exists()
+
+
+def test_library_build_refuses_an_unknown_noise_scale_in_one_line(tmp_path, capsys):
+    source = tmp_path / "films.csv"
+    source.write_text("not read\n")
+    out = tmp_path / "library.nc"
+    with pytest.raises(SystemExit) as stop:
+        main(["library", "build", str(source), "--out", str(out), "--noise-scale", "data"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    # argparse's wording of the choices differs between Python versions; the argument and value do not
+    assert "argument --noise-scale: invalid choice: 'data'" in err and "measured" in err and "model" in err
+    assert not out.exists()

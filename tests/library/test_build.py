@@ -466,3 +466,91 @@ def test_a_factor_whose_interval_lies_beyond_three_prior_sds_is_implausible():
     assert implausible_factor(edge * 1.01, edge * 1.2, sd) and implausible_factor(1 / (edge * 1.2), 1 / (edge * 1.01), sd)
     assert not implausible_factor(edge * 0.99, edge * 1.2, sd) and not implausible_factor(0.9, 1.1, sd)
 
+
+
+# --------------------------------------------------------------------------- the run's start, the noise scale
+
+def _layout(sets, fitted, noise_scale="measured"):
+    """The stage layout of ``sets`` with every pigment in ``fitted`` (as _fit_group builds it)."""
+    from bayespig.library.build import LibraryLayout
+    from bayespig.library.film_models import film_model
+    from bayespig.library.recipes import concentrations, film_recipes
+
+    model = film_model("radiative-transfer")
+    recipes = film_recipes(sets)
+    D = np.stack([concentrations(recipes[f], fitted, densities=DENSITIES) for f in sets])
+    return LibraryLayout(model, [model.for_film(ms) for ms in sets.values()], D, fitted, None, EPS, WAVELENGTHS,
+                         noise_scale=noise_scale)
+
+
+def test_the_joint_least_squares_start_frees_the_films_thicknesses():
+    """Two white masstones drawn at 0.4 and 2 x the nominal thickness and three greys at 0.6-2.5:
+    at the nominal thickness no constants reproduce both masstones, and the per-wavelength fit
+    stays far above the noise; fitting the constants and the thicknesses together reaches the
+    noise (chi^2 per value ~ 1) and the masstones' thickness ratio."""
+    from bayespig.inference.film_thickness import FilmThickness
+    from bayespig.library.build import _least_squares_start, _standardized_residual, joint_least_squares_start
+
+    table = load_table("8d-sce", progress=False)
+    films = {"W": ({"White": 1.0}, 0.4), "W2": ({"White": 1.0}, 2.0), "WB1": (RECIPES["WB1"], 1.0),
+             "WB2": (RECIPES["WB2"], 2.5), "WB3": ({"White": 0.95, "Black": 0.05}, 0.6)}
+    sets = {name: _film(name, recipe, h, 300 + k, table) for k, (name, (recipe, h)) in enumerate(films.items())}
+    layout = _layout(sets, ("White", "Black"))
+    prior = FilmThickness(tuple(sets))
+    n_values = layout.observed.size
+
+    def chi2(theta, log_h):
+        return float(np.sum(_standardized_residual(layout, theta, prior.model_inputs(log_h[None])) ** 2)) / n_values
+
+    centre = _least_squares_start(layout, np.exp(prior.nominal))
+    theta, log_h = joint_least_squares_start(layout, prior, centre)
+    before, after = chi2(centre, prior.nominal), chi2(theta, log_h)
+    # 1 % noise gives chi^2 ~ 1 per value (30 values, 4 x 3 constants and 5 thicknesses fitted:
+    # below 1; 2 is ~3 sd of chi^2 / n above it)
+    assert after < 2.0, after
+    assert before > 10.0 * after, (before, after)
+    # the masstones (tau 2 and 10) show their cards, so their ratio is fixed by the data (the
+    # greys hide theirs, tau >= 9, and keep the prior's thickness): 15 % is ~3 sd at 1 % noise
+    np.testing.assert_allclose(np.exp(log_h[1] - log_h[0]), 2.0 / 0.4, rtol=0.15)
+    # the start of the run: FilmThickness(start=...) moves the pilot, not the prior
+    spec = FilmThickness(tuple(sets), start=log_h)
+    np.testing.assert_allclose(spec.nominal, log_h)
+    np.testing.assert_array_equal(spec.mean, prior.mean)
+    np.testing.assert_array_equal(spec.log_prior(log_h[None]), prior.log_prior(log_h[None]))
+
+
+def test_a_film_thickness_start_is_clipped_into_the_prior_box_and_checked():
+    from bayespig.inference.film_thickness import THICKNESS_PRIOR_SDS, FilmThickness
+
+    spec = FilmThickness(("a", "b"), start=[10.0, -0.2])
+    assert spec.lower[0] < spec.nominal[0] < spec.upper[0] and spec.nominal[0] > THICKNESS_PRIOR_SDS * 0.5 * 0.99
+    assert spec.nominal[1] == -0.2
+    with pytest.raises(ValueError, match=r"start must be one finite log h per film \(2\)"):
+        FilmThickness(("a", "b"), start=[0.0])
+    with pytest.raises(ValueError, match="start must be one finite log h per film"):
+        FilmThickness(("a", "b"), start=[0.0, np.nan])
+
+
+@pytest.mark.parametrize("noise_scale", ["measured", "model"])
+def test_the_noise_scale_sets_the_sd_of_each_value(noise_scale):
+    """The layout's log-likelihood against scipy's normal density with sd = eps x the measured
+    value or eps x the predicted value (eq. 7), at predictions 30 % off."""
+    table = load_table("8d-sce", progress=False)
+    sets = {"W": _film("W", RECIPES["W"], 1.0, 7, table)}
+    layout = _layout(sets, ("White",), noise_scale=noise_scale)
+    values = np.concatenate([layout.observed[None] * 0.7, layout.observed[None] * 1.3])
+    scale = layout.observed if noise_scale == "measured" else values
+    expected = stats.norm.logpdf(layout.observed, loc=values, scale=EPS * scale)
+    np.testing.assert_allclose(layout.log_density(None, values), expected, rtol=1e-12)
+    np.testing.assert_allclose(layout.standardized_residual(values), (layout.observed - values) / (EPS * scale),
+                               rtol=1e-12)
+
+
+def test_an_unknown_noise_scale_is_refused_before_any_work(simulated):
+    sets, _, _ = simulated
+    with pytest.raises(ValueError, match="noise_scale must be one of 'measured', 'model', got 'data'"):
+        build_library(sets, noise_scale="data", progress=False)
+
+
+def test_the_noise_scale_is_recorded(library):
+    assert library.provenance["noise_scale"] == "measured"
