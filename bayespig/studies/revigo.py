@@ -607,7 +607,7 @@ def _substrate_factor_summary(study):
     rhat = max(c.factor_rhat for c in checks.values())
     fixed = len(study.checks) - len(checks)
     return (f"The posteriors of {len(checks)} films ({', '.join(sorted(checks))}) treat the cards as uncertain"
-            + (f" (the other {fixed} take the converted cards as fixed inputs: a joint run takes minutes per film)"
+            + (f" (the other {fixed} take the converted cards as fixed inputs)"
                if fixed else "")
             + f" (`bayespig.infer(..., substrate_sd={sd:g})`, `bayespig.inference.card_factors`): r_s = f r_s,card with one factor per card and film at all "
             f"wavelengths, log f ~ N(0, {sd:g}²) (90 % prior interval [{prior_low:.3f}, {prior_high:.3f}]), "
