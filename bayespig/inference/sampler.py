@@ -131,7 +131,7 @@ def _stored_draws_pass(theta, target_ess):
     return True
 
 
-def _run_verdict(chain, log_prob, settings, steps, dense_check=False):
+def _run_verdict(chain, log_prob, settings, steps, dense_check=False, stored_check=None):
     """Whether the run of one wavelength is complete after ``steps`` steps.
 
     Parameters
@@ -145,6 +145,11 @@ def _run_verdict(chain, log_prob, settings, steps, dense_check=False):
         joint run): on ``draws_per_chain`` = 128 independent draws per chain, R-hat <= 1.01 and
         ESS >= 400 fail by chance for ~10 % of the parameters each, so a check of ~90 of them
         on the stored draws alone fails at every check and the run goes to ``max_steps``.
+    stored_check : slice or numpy.ndarray, optional
+        Coordinates whose stored draws must pass too when ``dense_check`` (the few shared
+        parameters of a joint run, which a user reads off the stored draws: card factors,
+        roughness, thicknesses). Their chance failure rate on the stored draws is small for a
+        few coordinates, so the run ends soon after they pass.
 
     Returns
     -------
@@ -181,9 +186,14 @@ def _run_verdict(chain, log_prob, settings, steps, dense_check=False):
         else:
             checked = theta
         complete = _stored_draws_pass(checked, settings.target_ess)
+        if complete and dense_check and stored_check is not None:
+            complete = _stored_draws_pass(theta[..., stored_check], settings.target_ess)
         chunk = max(settings.check_interval, steps // 2)
     else:
-        chunk = max(settings.check_interval, int(1.1 * needed) - steps)
+        # extrapolated from tau_int, but at most doubling the run: tau_int of a short chain is
+        # unreliable (a walker that has not moved in some coordinate sets it to the chain's
+        # length), and one bad estimate must not send the run to many times its need
+        chunk = max(settings.check_interval, min(int(1.1 * needed) - steps, steps))
     capped = not complete and steps >= settings.max_steps
     if not (complete or capped):
         return chunk
@@ -192,7 +202,7 @@ def _run_verdict(chain, log_prob, settings, steps, dense_check=False):
 
 
 def _sample_stack(stacked, singles, starts, settings, seed_sequences, moves=None, start_walkers=None,
-                  dense_check=False):
+                  dense_check=False, stored_check=None):
     """emcee run of a stack of wavelengths in one sampler; one run record per wavelength.
 
     Every wavelength has ``n_ensembles`` ensembles of ``n_walkers`` walkers of its own
@@ -224,6 +234,8 @@ def _sample_stack(stacked, singles, starts, settings, seed_sequences, moves=None
         around ``starts``.
     dense_check : bool
         The diagnostics on the thinned chain rather than the stored draws (:func:`_run_verdict`).
+    stored_check : slice or numpy.ndarray, optional
+        With ``dense_check``, coordinates whose stored draws must pass as well (:func:`_run_verdict`).
 
     Returns
     -------
@@ -276,7 +288,8 @@ def _sample_stack(stacked, singles, starts, settings, seed_sequences, moves=None
         chunks = []
         for k in np.flatnonzero(live):
             block = slice(k * per_member, (k + 1) * per_member)
-            verdict = _run_verdict(chain[:, block], log_prob[:, block], settings, steps, dense_check)
+            verdict = _run_verdict(chain[:, block], log_prob[:, block], settings, steps, dense_check,
+                                   stored_check)
             if isinstance(verdict, dict):
                 verdict["acceptance_rate"] = (accepted[block] / steps).reshape(n_chains, -1).mean(axis=1)
                 verdict["predictive_seed"] = children[k][2]

@@ -162,6 +162,36 @@ def test_the_dense_check_completes_a_many_parameter_run_the_stored_draws_cannot(
     assert done["theta"].shape == (settings.n_ensembles, 128, 94)
 
 
+def test_the_shared_coordinates_stored_draws_must_pass_too():
+    """With ``stored_check``, a joint run whose thinned chain passes is still not complete while
+    a shared coordinate's stored draws fail (here one ensemble offset by 0.5 sd in it: R-hat of
+    the stored draws ~1.03); without the offset it completes at the same step."""
+    from bayespig.inference.sampler import _run_verdict
+
+    settings = InferenceSettings(target_ess=400, draws_per_chain=128)
+    steps, width = 2000, settings.n_walkers
+    chain = np.random.default_rng(1).standard_normal((steps, settings.n_ensembles * width, 6))
+    log_prob = -0.5 * (chain ** 2).sum(axis=2)
+    assert isinstance(_run_verdict(chain, log_prob, settings, steps, dense_check=True, stored_check=slice(5, 6)), dict)
+    offset = chain.copy()
+    offset[-steps // 4:, :width, 5] += 0.5  # the last quarter of one ensemble: the stored draws see it
+    verdict = _run_verdict(offset, log_prob, settings, steps, dense_check=True, stored_check=slice(5, 6))
+    assert isinstance(verdict, int) and verdict >= settings.check_interval
+
+
+def test_the_run_at_most_doubles_on_an_early_autocorrelation_estimate():
+    """A walker that has not moved in the second half of a short run makes tau_int undefined
+    (the chain's length): the next chunk is then the run's length, not 50 tau_int more."""
+    from bayespig.inference.sampler import _run_verdict
+
+    settings = InferenceSettings(target_ess=400, draws_per_chain=128)
+    steps = 400
+    chain = np.random.default_rng(2).standard_normal((steps, settings.n_ensembles * settings.n_walkers, 3))
+    chain[steps // 2:, 0, 1] = chain[steps // 2, 0, 1]  # stuck
+    log_prob = -0.5 * (chain ** 2).sum(axis=2)
+    assert _run_verdict(chain, log_prob, settings, steps, dense_check=True) == steps
+
+
 class _GaussianBlocks:
     """A known joint target with the interface BlockwiseMove uses: phi ~ N(0, 1) and per block
     (wavelength) r ~ N(b phi, Sigma) given phi, so the blocks are coupled through phi."""
@@ -199,17 +229,21 @@ class _GaussianBlocks:
         return cov
 
 
-def test_the_block_move_samples_a_known_coupled_gaussian():
-    """BlockwiseMove mixed with whole-vector DE (as sample_joint runs it), 2 ensembles: the
-    target's mean and covariance within MC_Z Monte Carlo errors, a sane acceptance, and the
-    cached wavelength terms equal to a fresh evaluation at every walker's final position."""
+@pytest.mark.parametrize("gaussian_weight", [None, 0.0, 1.0], ids=["default", "de-blocks", "gaussian-blocks"])
+def test_the_block_move_samples_a_known_coupled_gaussian(gaussian_weight):
+    """BlockwiseMove mixed with whole-vector DE (as sample_joint runs it), 2 ensembles, with its
+    default mixture of block proposals and with each alone (the Gaussian independence proposal
+    is 1.5x wider than the blocks' spread, so without its Hastings factor the sampled
+    covariance would be too wide): the target's mean and covariance within MC_Z Monte Carlo
+    errors, a sane acceptance, and the cached wavelength terms equal to a fresh evaluation at
+    every walker's final position."""
     from bayespig.inference import IndependentEnsemblesMove
     from bayespig.inference.shared import JOINT_DE_WEIGHT, BlockwiseMove
 
     target = _GaussianBlocks()
     cov = target.covariance()
     n_ensembles, width = 2, 16
-    move = BlockwiseMove(target, n_ensembles)
+    move = BlockwiseMove(target, n_ensembles, gaussian_weight=gaussian_weight)
     sampler = emcee.EnsembleSampler(n_ensembles * width, 7, target, vectorize=True,
                                     moves=[(move, 1.0 - JOINT_DE_WEIGHT),
                                            (IndependentEnsemblesMove("de", n_ensembles), JOINT_DE_WEIGHT)])
