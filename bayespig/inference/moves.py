@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["GAUSSIAN_PROPOSAL_SCALE", "IndependentEnsemblesMove", "ensemble_halves"]
+__all__ = ["GAUSSIAN_PROPOSAL_SCALE", "IndependentEnsemblesMove", "ensemble_halves",
+           "gaussian_independence_proposal"]
 
 #: Width of the ``"gaussian"`` independence proposal relative to the complementary walkers'
 #: spread (a proposal somewhat wider than the target keeps the importance ratio bounded).
@@ -45,6 +46,39 @@ def ensemble_halves(n_total, n_ensembles, random, blocks=None, owner="a move"):
     order = np.argsort(random.rand(blocks.size, width), axis=1)
     order += (blocks * width)[:, None]
     return (order[:, :half], order[:, half:]), (order[:, half:], order[:, :half])
+
+
+def gaussian_independence_proposal(s, c, random):
+    """Gaussian independence proposals for walkers ``s`` from a Gaussian fitted to ``c``.
+
+    ``q ~ N(mean_c, S^2 cov_c)`` with ``S`` = :data:`GAUSSIAN_PROPOSAL_SCALE`, per leading
+    (batch) index: an ensemble, or an ensemble's block of coordinates.
+
+    Parameters
+    ----------
+    s : numpy.ndarray
+        Current points, (..., h, d).
+    c : numpy.ndarray
+        The complementary walkers, (..., m, d), the same leading shape.
+    random : numpy.random.RandomState
+        emcee's random state.
+
+    Returns
+    -------
+    tuple
+        ``(q, log_factor)``: proposals (..., h, d) and the Hastings factor
+        ``log N(x) - log N(q)`` of the proposal (..., h) (its constants cancel).
+    """
+    d, m = s.shape[-1], c.shape[-2]
+    mean = c.mean(axis=-2, keepdims=True)
+    spread = c - mean
+    cov = np.einsum("...mi,...mj->...ij", spread, spread) / (m - 1)
+    ridge = 1e-12 * np.trace(cov, axis1=-2, axis2=-1) / d + 1e-300  # coincident walkers
+    chol = GAUSSIAN_PROPOSAL_SCALE * np.linalg.cholesky(cov + ridge[..., None, None] * np.eye(d))
+    z = random.randn(*s.shape)
+    q = mean + np.einsum("...ij,...hj->...hi", chol, z)
+    w = np.einsum("...ij,...hj->...hi", np.linalg.inv(chol), s - mean)  # whitened current point
+    return q, 0.5 * ((z * z).sum(axis=-1) - (w * w).sum(axis=-1))
 
 
 class IndependentEnsemblesMove:
@@ -127,16 +161,7 @@ class IndependentEnsemblesMove:
             gamma = 2.38 / np.sqrt(2.0 * d) * (1.0 + 1e-5 * random.randn(n_blocks, h, 1))
             return s + gamma * (_pick(c, first) - _pick(c, second)), np.zeros((n_blocks, h))
         if self.kind == "gaussian":
-            mean = c.mean(axis=1, keepdims=True)  # (G, 1, d)
-            spread = c - mean
-            cov = np.einsum("gmi,gmj->gij", spread, spread) / (m - 1)
-            ridge = 1e-12 * np.trace(cov, axis1=1, axis2=2) / d + 1e-300  # coincident walkers
-            chol = GAUSSIAN_PROPOSAL_SCALE * np.linalg.cholesky(cov + ridge[:, None, None] * np.eye(d))
-            z = random.randn(n_blocks, h, d)
-            q = mean + np.einsum("gij,ghj->ghi", chol, z)
-            w = np.einsum("gij,ghj->ghi", np.linalg.inv(chol), s - mean)  # whitened current point
-            # Hastings factor log N(x) - log N(q) of the proposal (its constants cancel)
-            return q, 0.5 * ((z * z).sum(axis=-1) - (w * w).sum(axis=-1))
+            return gaussian_independence_proposal(s, c, random)
         order = np.argsort(random.rand(n_blocks, h, m), axis=-1)[..., :3]
         z, z1, z2 = (_pick(c, order[..., k]) for k in range(3))
         delta = s - z

@@ -117,7 +117,7 @@ import dataclasses
 import numpy as np
 
 from ..likelihood import Priors, multiplicative_normal_logpdf
-from .moves import GAUSSIAN_PROPOSAL_SCALE, IndependentEnsemblesMove, ensemble_halves
+from .moves import IndependentEnsemblesMove, ensemble_halves, gaussian_independence_proposal
 from .outputs import STORED_DRAW_DTYPE
 from .sampler import _sample_stack
 
@@ -155,9 +155,10 @@ JOINT_DE_WEIGHT = 0.2
 #: proposal per block instead of DE: DE from 16 walkers random-walks along a block's ravine
 #: (Revigo 02B with DE blocks alone: tau_int of a log tau up to 68 steps, 4143 steps, 30 s;
 #: the per-wavelength pilot with "gaussian-de" has tau_int <= 15). The 13 Revigo card-factor
-#: films (`bayespig.infer(..., substrate_sd=0.1)`, method 4, 128 draws per chain, one core):
-#: DE blocks alone 10-36 s per film (median 18 s); weight 0.8 10-32 s (median 15 s); weight
-#: 0.5 8-18 s (median 10.7 s), every factor's stored draws R-hat <= 1.008 and ESS >= 408.
+#: films (``python benchmarks/substrate_factors.py --revigo-only``: method 4, substrate_sd 0.1,
+#: 128 draws per chain, seed 0): DE blocks alone 10-36 s per film (median 18 s); weight 0.8
+#: 10-32 s (median 15 s); weight 0.5 8.0-18.3 s (median 11.9 s), none capped, every factor's
+#: stored draws R-hat <= 1.0071 and ESS >= 403.
 BLOCK_GAUSSIAN_WEIGHT = 0.5
 #: Steps of the adaptation run of :func:`sample_joint` whose draws give the blocks' sensitivity
 #: to the shared parameters by regression (and the centre ``theta_hat``); then discarded.
@@ -706,28 +707,12 @@ class BlockwiseMove:
 
     @staticmethod
     def _gaussian_step(s, c, columns, random):
-        """Gaussian independence proposals of the blocks ``columns`` (n_blocks, k).
-
-        Per ensemble and block, ``q ~ N(mean_c, S^2 cov_c)`` fitted to the other half ``c``
-        (E, m, d) with ``S`` = :data:`~bayespig.inference.moves.GAUSSIAN_PROPOSAL_SCALE`.
-
-        Returns
-        -------
-        tuple
-            ``(q, log_factor)``: the proposed block values (E, h, n_blocks, k) and the Hastings
-            factor ``log N(x) - log N(q)`` per walker and block (E, h, n_blocks).
-        """
-        k = columns.shape[-1]
-        x, others = s[:, :, columns], c[:, :, columns]  # (E, h | m, n_blocks, k)
-        mean = others.mean(axis=1, keepdims=True)
-        spread = others - mean
-        cov = np.einsum("emni,emnj->enij", spread, spread) / (others.shape[1] - 1)
-        ridge = 1e-12 * np.trace(cov, axis1=-2, axis2=-1) / k + 1e-300  # coincident walkers
-        chol = GAUSSIAN_PROPOSAL_SCALE * np.linalg.cholesky(cov + ridge[..., None, None] * np.eye(k))
-        z = random.randn(*x.shape)
-        q = mean + np.einsum("enij,ehnj->ehni", chol, z)
-        w = np.einsum("enij,ehnj->ehni", np.linalg.inv(chol), x - mean)
-        return q, 0.5 * ((z * z).sum(axis=-1) - (w * w).sum(axis=-1))
+        """:func:`~bayespig.inference.moves.gaussian_independence_proposal` of each block ``columns``
+        (n_blocks, k) per ensemble: proposals (E, h, n_blocks, k) and Hastings factors (E, h, n_blocks)."""
+        x = np.moveaxis(s[:, :, columns], 2, 1)  # (E, n_blocks, h, k)
+        others = np.moveaxis(c[:, :, columns], 2, 1)
+        q, factor = gaussian_independence_proposal(x, others, random)
+        return np.moveaxis(q, 1, 2), np.moveaxis(factor, 1, 2)
 
     def propose(self, model, state):
         """One red-blue update of every walker of every ensemble (emcee's Move interface)."""
