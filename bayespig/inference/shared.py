@@ -156,9 +156,10 @@ JOINT_DE_WEIGHT = 0.2
 #: (Revigo 02B with DE blocks alone: tau_int of a log tau up to 68 steps, 4143 steps, 30 s;
 #: the per-wavelength pilot with "gaussian-de" has tau_int <= 15). The 13 Revigo card-factor
 #: films (``python benchmarks/substrate_factors.py --revigo-only``: method 4, substrate_sd 0.1,
-#: 128 draws per chain, seed 0): DE blocks alone 10-36 s per film (median 18 s); weight 0.8
-#: 10-32 s (median 15 s); weight 0.5 8.0-18.3 s (median 11.9 s), none capped, every factor's
-#: stored draws R-hat <= 1.0071 and ESS >= 403.
+#: 128 draws per chain, seed 0) took 10-36 s per film (median 18 s) with DE blocks alone,
+#: before the run-length cap and the stored-draw check of :func:`bayespig.inference.sampler._run_verdict`;
+#: with both, weight 0.8 gave 10-32 s (median 15 s, a scratch run) and weight 0.5 8.0-18.3 s
+#: (median 11.9 s), none capped, every factor's stored draws R-hat <= 1.0071 and ESS >= 403.
 BLOCK_GAUSSIAN_WEIGHT = 0.5
 #: Steps of the adaptation run of :func:`sample_joint` whose draws give the blocks' sensitivity
 #: to the shared parameters by regression (and the centre ``theta_hat``); then discarded.
