@@ -496,14 +496,14 @@ class ForwardModel:
         if self.flakes and not self.rough:
             raise ValueError("flakes need roughness > 0 (the flakes' lobe is modelled with the tables of a rough "
                              "surface)")
+        if self.flakes:  # checked before the tables are loaded (a build can take a minute)
+            hemispherical = [film.name for film in self.problem.films
+                             if any(ch.kind == "hemispherical" for ch in film.instrument.channels)]
+            if hemispherical:
+                raise ValueError(f"flakes are modelled for BRDF and 45/0 channels only; film(s) "
+                                 f"{', '.join(map(repr, hemispherical))} have hemispherical channels")
         if self.rough:
             self._rough_tables()
-            if self.flakes:
-                hemispherical = [film.name for film in self.problem.films
-                                 if any(ch.kind == "hemispherical" for ch in film.instrument.channels)]
-                if hemispherical:
-                    raise ValueError(f"flakes are modelled for BRDF and 45/0 channels only; film(s) "
-                                     f"{', '.join(map(repr, hemispherical))} have hemispherical channels")
             return
         self._film_tables = []
         for film in self.problem.films:

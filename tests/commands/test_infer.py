@@ -92,17 +92,3 @@ def test_infer_warns_of_a_posterior_at_its_prior_bound(tmp_path, capsys):
     assert markdown.index("Prior edge") < markdown.index("## Optical properties")
     summary_json = json.loads((tmp_path / "report" / "summary.json").read_text())
     assert [e["text"] for e in summary_json["prior_edge"]] == [message]
-
-
-def test_infer_warns_when_g_free_is_pinned_at_its_prior_limit(tmp_path, capsys):
-    """An opaque film scattering with g = 0.9, beyond the prior's 0.8: g piles at 0.8, and infer says so."""
-    data = tmp_path / "film.csv"
-    simulate_to_csv(data, a=[0.05, 0.2], tau=1.0, g=0.9, design=[{"name": "opaque", "opaque": True}],
-                    wavelengths=[450.0, 600.0], eps=0.01, seed=1)
-    assert run(["infer", str(data), "--out", str(tmp_path / "out"), "--g", "free", "--no-progress"]) == 0
-    assert ("bayespig: warning: g is at its prior bound 0.8 at 450-600 nm: the data do not tell it from 0.8 or "
-            "push it beyond its prior range [-0.5, 0.8]; unless it can truly be that close to 0.8, the model may "
-            "be wrong for these data (or the prior too narrow)\n"
-            ) in capsys.readouterr().err
-    summary = pd.read_csv(tmp_path / "out" / "summary.csv", keep_default_na=False)
-    assert list(summary["prior_edge"]) == ["g at 0.8", "g at 0.8"]

@@ -143,14 +143,32 @@ def test_inferred_eps_and_method1_groups(tmp_path):
     assert eps_back.attrs == {"long_name": "relative measurement error eps (eq. 7)", "units": "1"}
 
 
-def test_free_g_posterior_recovers_the_simulated_g(tmp_path):
+#: A coarse g table over the default prior range of g, [-0.5, 0.8] (the default table's code path,
+#: built in seconds; its interpolation error is far below the tests' eps).
+COARSE_G = dict(g_range=(-0.5, 0.8), n_g=9, n_a=16, log2_tau_min=-4, log2_tau_max=7, per_octave=2)
+
+
+@pytest.fixture(scope="module")
+def coarse_g_cache(tmp_path_factory):
+    """One table cache for the module's g-free runs (the coarse table is built once)."""
+    return tmp_path_factory.mktemp("coarse-g-cache")
+
+
+def _coarse_g_tables(problem, cache_dir):
+    from bayespig.table import TableSettings, load_table
+
+    instrument = problem.films[0].instrument
+    return {instrument: load_table(instrument, g="free", settings=TableSettings(**COARSE_G), cache_dir=cache_dir,
+                                   progress=False)}
+
+
+def test_free_g_posterior_recovers_the_simulated_g(coarse_g_cache):
     """g="free" end to end: a g axis in the posterior, its diagnostics, and the simulated
     (a, tau, g) inside the posterior at every wavelength of a stack. The data come from the
     direct solver, the likelihood from a coarse g table (the default table's code path, built
     in seconds), whose interpolation error is far below eps."""
     from bayespig.inference import infer_problem
     from bayespig.likelihood import Problem
-    from bayespig.table import TableSettings, load_table
 
     design = [{"name": "opaque", "opaque": True},
               {"name": "on_black", "substrate": "black", "film_group": "thin"},
@@ -159,12 +177,8 @@ def test_free_g_posterior_recovers_the_simulated_g(tmp_path):
     ms = simulate(**truth, design=design, instrument="multi-angle-45", wavelengths=[500.0, 600.0],
                   eps=0.02, seed=8)
     problem = Problem.from_measurements(ms, method="general")
-    coarse = TableSettings(g_range=(-0.5, 0.8), n_g=9, n_a=16, log2_tau_min=-4, log2_tau_max=7,
-                           per_octave=2)
-    table = load_table(problem.films[0].instrument, g="free", settings=coarse, cache_dir=tmp_path,
-                       progress=False)
     idata = infer_problem(problem, seed=3, g="free", eps=0.02, executor=None, progress=False,
-                          settings=FAST, tables={problem.films[0].instrument: table})
+                          settings=FAST, tables=_coarse_g_tables(problem, coarse_g_cache))
     post = idata.posterior
     assert post["g"].dims == ("chain", "draw", "wavelength")
     assert "g" in json.loads(post.attrs["parameter_names"]) and post.attrs["g"] == "free"
@@ -179,6 +193,26 @@ def test_free_g_posterior_recovers_the_simulated_g(tmp_path):
         draws = transform(post[name].values.reshape(-1, 2))
         z = (draws.mean(axis=0) - transform(truth[name])) / draws.std(axis=0)
         assert (np.abs(z) < 4).all(), (name, z)
+
+
+def test_g_beyond_its_prior_piles_at_the_bound_and_is_flagged(coarse_g_cache):
+    """An opaque gonio film scattering with g = 0.9, beyond the prior's 0.8 (data from the direct
+    solver): g piles at 0.8, and the prior-edge flags (the warning infer and report print, the
+    summary's prior_edge column) say so at both wavelengths."""
+    from bayespig.inference import infer_problem
+    from bayespig.likelihood import Problem
+    from bayespig.report.quantities import prior_edge_column, prior_edges
+
+    ms = simulate(a=[0.05, 0.2], tau=1.0, g=0.9, design=[{"name": "opaque", "opaque": True}],
+                  instrument="multi-angle-45", wavelengths=[450.0, 600.0], eps=0.01, seed=1)
+    problem = Problem.from_measurements(ms, method="general")
+    idata = infer_problem(problem, seed=0, g="free", eps=0.01, executor=None, progress=False, settings=FAST,
+                          tables=_coarse_g_tables(problem, coarse_g_cache))
+    assert [e["text"] for e in prior_edges(idata) if e["variable"] == "g"] == [
+        "g is at its prior bound 0.8 at 450-600 nm: the data do not tell it from 0.8 or push it beyond its prior "
+        "range [-0.5, 0.8]; unless it can truly be that close to 0.8, the model may be wrong for these data (or "
+        "the prior too narrow)"]
+    assert list(prior_edge_column(idata)) == ["g at 0.8", "g at 0.8"]
 
 
 def test_general_problem_with_two_groups_has_tau_group():
