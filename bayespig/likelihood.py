@@ -493,10 +493,10 @@ class ForwardModel:
         if self.binder_index_free and not self.rough:
             raise ValueError("a binder index per row needs roughness > 0 (the look-up tables over n are those "
                              "of a rough surface)")
-        if self.flakes and not self.rough:
-            raise ValueError("flakes need roughness > 0 (the flakes' lobe is modelled with the tables of a rough "
-                             "surface)")
-        if self.flakes:  # checked before the tables are loaded (a build can take a minute)
+        if self.flakes:  # both checked before the tables are loaded (a build can take a minute)
+            if not self.rough:
+                raise ValueError("flakes need roughness > 0 (the flakes' lobe is modelled with the tables of a "
+                                 "rough surface)")
             hemispherical = [film.name for film in self.problem.films
                              if any(ch.kind == "hemispherical" for ch in film.instrument.channels)]
             if hemispherical:

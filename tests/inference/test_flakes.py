@@ -120,7 +120,7 @@ def test_flake_priors_are_recorded_for_the_prior_edge_flags(metallic_idata):
         "log-uniform on [0.02, 1], one flake roughness for every film of the set")
 
 
-def test_bad_flake_arguments_are_refused_with_one_clear_message(metallic_set):
+def test_bad_flake_arguments_are_refused_with_one_clear_message(metallic_set, monkeypatch):
     with pytest.raises(ValueError) as caught:
         infer(metallic_set, flakes=True, progress=False)
     assert str(caught.value) == ("flakes=True needs roughness='free' (the flakes' roughness is inferred in the "
@@ -134,7 +134,11 @@ def test_bad_flake_arguments_are_refused_with_one_clear_message(metallic_set):
                                  "got (0.0, 1.0)")
     sphere = simulate(a=[0.2], tau=1.0, design=[FilmSpec("paint", opaque=True)], instrument="8d-sce",
                       wavelengths=[500.0], eps=0.02, seed=1)
-    with pytest.raises(ValueError) as caught:
+    def no_tables(model):
+        raise AssertionError("the rough tables were loaded before the flakes' channels were checked")
+
+    with monkeypatch.context() as patch, pytest.raises(ValueError) as caught:
+        patch.setattr(ForwardModel, "_rough_tables", no_tables)  # the refusal comes before any table work
         ForwardModel(Problem.from_measurements(sphere, "auto"), roughness=0.1, flakes=True)
     assert str(caught.value) == ("flakes are modelled for BRDF and 45/0 channels only; film(s) 'paint' have "
                                  "hemispherical channels")
