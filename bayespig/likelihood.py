@@ -44,6 +44,8 @@ import numpy as np
 from ._validation import broadcast, real_array
 from .instruments import Instrument
 from .physics.forward import specular_transmittance, surface_roughness
+from .rough_table import FixedRoughnessTable, load_binder_index_tables, load_rough_table
+from .table import load_table
 
 __all__ = [
     "METHODS",
@@ -485,8 +487,6 @@ class ForwardModel:
     flakes: bool = False
 
     def __post_init__(self):
-        from .table import load_table
-
         if self.g not in ("isotropic", "free"):
             raise ValueError(f"g must be 'isotropic' or 'free', got {self.g!r}")
         self.roughness = surface_roughness(self.roughness)
@@ -530,13 +530,9 @@ class ForwardModel:
 
     def _rough_tables(self):
         """The rough-surface tables of every film at :attr:`roughness` (opaque films only)."""
-        from .rough_table import FixedRoughnessTable, load_rough_table
-
         if self.g != "isotropic":
             raise ValueError("roughness > 0 needs g='isotropic' (the look-up tables of a rough surface are "
                              "isotropic)")
-        from .rough_table import load_binder_index_tables
-
         self._film_tables, self._rough = [], []
         self.binder_index_tables = {}  # rough table key -> BinderIndexRoughTables of its instrument
         for film in self.problem.films:
