@@ -851,6 +851,11 @@ class MeasurementSet:
         if problems:
             raise MeasurementError(problems).located(self.source)
 
+    def __reduce__(self):
+        """Pickle by the constructor's arguments (the read-only metadata as a dict), so a set can
+        be sent to a worker process as it is and is checked again when it arrives."""
+        return (type(self), (self.wavelength_nm, self.samples, self.n, dict(self.metadata), self.source))
+
     # ------------------------------------------------------------------ access
     @property
     def n_wavelengths(self):

@@ -7,6 +7,8 @@ import json
 
 import numpy as np
 
+from .._versions import package_versions
+
 #: CF-style ``long_name`` and ``units`` of the posterior variables (``"1"``: dimensionless).
 VARIABLE_ATTRS = {
     "a": {"long_name": "relative absorption k_abs/k_ext", "units": "1"},
@@ -95,15 +97,8 @@ def noise_floor_units(problem):
 
 
 def _versions():
-    import arviz
-    import emcee
-    import scipy
-
-    from .. import __version__
-
-    return {"bayespig_version": __version__, "numpy_version": np.__version__,
-            "scipy_version": scipy.__version__, "emcee_version": emcee.__version__,
-            "arviz_version": arviz.__version__}
+    """The posterior's attributes ``<package>_version`` (:func:`bayespig._versions.package_versions`)."""
+    return {f"{name}_version": version for name, version in package_versions().items()}
 
 
 #: InferenceData attribute with the support of every posterior variable's prior (JSON), read by
@@ -228,6 +223,8 @@ def _inference_data(problem, model, results, settings, log_post0, fit, *, seed, 
         "n_burn_in": (("wavelength",), np.array([r["n_burn_in"] for r in results])),
         "thinning": (("wavelength",), np.array([r["thin"] for r in results])),
         "max_steps_reached": (("wavelength",), np.array([int(r["max_steps_reached"]) for r in results])),
+        # runs of the joint sampler's adaptation before its run proper (0: a per-wavelength run)
+        "adaptation_rounds": (("wavelength",), np.array([int(r.get("adaptation_rounds", 0)) for r in results])),
     }
     for spec, (_, autocorr) in shared:
         sample_stats[f"{spec.variable}_autocorr_time"] = ((spec.dimension,), autocorr)

@@ -814,7 +814,8 @@ def sample_blocks(model, specs, draws, settings, joint_seed, start_seed, priors=
     tuple
         ``(run, settings, joint)``: the run record of :func:`bayespig.inference.sampler._sample_stack`
         (``theta``: the draws in ``u``, (chain, draw, n_dim); ``autocorr_time`` per coordinate
-        of ``u``; ``n_steps``, ``max_steps_reached``, ...), the settings used, and the
+        of ``u``; ``n_steps``, ``max_steps_reached``, ...; and ``adaptation_rounds``, the
+        adaptation runs before it, 1 to :data:`MAX_ADAPTATION_ROUNDS`), the settings used, and the
         :class:`JointLogPosterior` of the run proper (its :meth:`~JointLogPosterior.unpack`
         gives the physical values).
     """
@@ -872,6 +873,7 @@ def sample_blocks(model, specs, draws, settings, joint_seed, start_seed, priors=
         if done:
             break
     run = run_joint(joint, used, joint_seed, walkers)
+    run["adaptation_rounds"] = round_index + 1
     return run, used, joint
 
 
@@ -986,7 +988,7 @@ def sample_joint(model, specs, draws, priors, eps, settings, joint_seed, start_s
             "acceptance_rate": run["acceptance_rate"],
             "autocorr_time": autocorr[block_index[i]],
             "n_steps": run["n_steps"], "n_burn_in": run["n_burn_in"], "thin": run["thin"],
-            "max_steps_reached": run["max_steps_reached"],
+            "max_steps_reached": run["max_steps_reached"], "adaptation_rounds": run["adaptation_rounds"],
         }
         if floor is not None:
             record["noise_floor"] = floor[:, i].reshape(shape)

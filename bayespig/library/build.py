@@ -139,7 +139,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import importlib.metadata
 import os
 import sys
 import time
@@ -150,6 +149,7 @@ import numpy as np
 from scipy import optimize, sparse
 
 from .._pool import executor_or_local_pool
+from .._versions import package_versions
 from ..inference.arguments import check_flag, check_substrate_sd
 from ..inference.card_factors import FACTOR_PRIOR_SDS, CardFactors, card_indices
 from ..inference.concentration_factors import (CONCENTRATION_PRIOR_SDS, ConcentrationFactors,
@@ -628,20 +628,11 @@ def joint_least_squares_start(layout, thickness_spec, centre, max_nfev=JOINT_STA
     return x[:n_wl * k].reshape(n_wl, k), x[n_wl * k:]
 
 
-def _portable(measurements):
-    """A MeasurementSet as picklable fields (its metadata is a read-only mapping, which pickle refuses)."""
-    fields = {f.name: getattr(measurements, f.name) for f in dataclasses.fields(measurements)}
-    fields["metadata"] = dict(fields["metadata"])
-    return fields
-
-
 def _fit_group(task):
     """One stage group's joint run (a process-pool task): constants and thickness draws."""
-    from ..data import MeasurementSet
-
     start_time = time.perf_counter()
     film_model = _film_model(task["model"])
-    sets = [MeasurementSet(**fields) for fields in task["measurements"]]
+    sets = task["measurements"]
     predictors = [film_model.for_film(ms) for ms in sets]
     wavelength_nm = np.asarray(sets[0].wavelength_nm, dtype=float)
     layout = LibraryLayout(film_model, predictors, task["concentrations"], task["pigments"],
@@ -708,6 +699,7 @@ def _fit_group(task):
         "diagnostics": {
             "stage": task["stage"], "pigments": list(task["pigments"]), "films": list(task["films"]),
             "n_steps": int(run["n_steps"]), "max_steps_reached": bool(run["max_steps_reached"]),
+            "adaptation_rounds": int(run["adaptation_rounds"]),
             "n_walkers": int(used.n_walkers), "n_ensembles": int(used.n_ensembles),
             "thickness_rhat_max": float(rhat_h.max()), "thickness_ess_min": float(ess_h.min()),
             "constants_rhat_max": float(rhat_c.max()), "constants_ess_min": float(ess_c.min()),
@@ -729,16 +721,6 @@ def _read_measurements(measurements):
         raise TypeError("measurements must be a non-empty dict film id -> MeasurementSet, or a path to the "
                         f"Revigo data folder, got {type(measurements).__name__}")
     return measurements
-
-
-def _versions():
-    out = {}
-    for name in ("bayespig", "numpy", "scipy", "emcee", "arviz"):
-        try:
-            out[name] = importlib.metadata.version(name)
-        except importlib.metadata.PackageNotFoundError:
-            out[name] = "unknown"
-    return out
 
 
 def build_library(measurements, *, model="radiative-transfer", seed=0, executor=None, progress=True,
@@ -850,7 +832,6 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
         inherited = base.provenance.get("conditioning") or {}
         conditioned_on.update(inherited.get("conditioned_on", {}))
         fixed_constants.update({p: np.asarray(v, dtype=float) for p, v in inherited.get("fixed_constants", {}).items()})
-    n_wl = wavelengths[0].size
     results = []
     start = time.perf_counter()
     for s, groups in enumerate(stages, start=1):
@@ -863,7 +844,7 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
                 fixed_constants[p] = medians[p]
             order = tuple(pigments) + tuple(fixed)
             tasks.append({
-                "model": model, "measurements": [_portable(sets[f]) for f in films], "films": films,
+                "model": model, "measurements": [sets[f] for f in films], "films": films,
                 "pigments": tuple(pigments), "stage": s,
                 "concentrations": np.stack([concentrations(recipes[f], order, densities=densities) for f in films]),
                 "fixed_constants": (np.stack([medians[p] for p in fixed], axis=1) if fixed else None),
@@ -991,7 +972,7 @@ def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, setting
     thickness_prior = (float(log_h.mean()), float(log_h.std(ddof=1)) if log_h.size > 1 else 0.5)
     provenance = {
         "seed": int(seed), "eps": float(eps), "base_pigments": None if base_pigments is None else list(base_pigments),
-        "settings": dataclasses.asdict(settings), "versions": _versions(), "seconds": seconds,
+        "settings": dataclasses.asdict(settings), "versions": package_versions(), "seconds": seconds,
         "stage_plan": [[{"pigments": list(p), "films": list(f)} for p, f in groups] for groups in stages],
         "unused_films": list(unused),
         "base_library": None if base is None else {"pigments": list(base.pigments),

@@ -32,9 +32,8 @@ from scipy import optimize
 
 from .. import colorimetry
 from .._pool import executor_or_local_pool
-from ..data import MeasurementSet
 from ..inference.settings import InferenceSettings
-from .build import DEFAULT_NOISE_SCALE, _base_pigments, _portable as portable_fields, build_library, check_noise_scale
+from .build import DEFAULT_NOISE_SCALE, _base_pigments, build_library, check_noise_scale
 from .match import match_paint
 from .predict import DEFAULT_LEVEL, joint_constants, model_error_from_residuals, predict_reflectance
 from .recipes import film_recipes
@@ -88,6 +87,11 @@ class FilmPrediction:
         No stage of its library reached the step cap.
     worst_band_nm : float
         Band of the largest relative residual.
+    thickness_per_card, delta_E_per_card : tuple of float
+        The thickness fitted to each card's spectrum alone, and the ΔE00 of the prediction there:
+        a drawdown over a black and a white card is two spots of paint, not necessarily of one
+        thickness (Revigo: 91 bands of 13 films measured brighter over black than over white,
+        which no single thickness gives).
     """
 
     film_id: str
@@ -105,6 +109,8 @@ class FilmPrediction:
     seconds: float
     converged: bool
     worst_band_nm: float
+    thickness_per_card: tuple = ()
+    delta_E_per_card: tuple = ()
 
 
 def card_spectra(measurements):
@@ -145,13 +151,27 @@ def training_films(recipes, target, base_pigments):
 
 
 def _fit_thickness(library, recipe, constants, instrument, pairs):
-    """The one free scalar: relative thickness minimising the relative misfit over every card."""
+    """The one free scalar: relative thickness minimising the relative misfit over every card.
+
+    The misfit is that of the library's own likelihood: each value's deviation relative to the
+    measured value, or to the predicted one for a library built with eq. (7)'s scale
+    (``provenance["noise_scale"]``, :data:`bayespig.library.build.NOISE_SCALES`; a library saved
+    without it predates the measured scale and used eq. 7's). Revigo series 01-15, point
+    estimates of every leave-one-out library (``benchmarks/loo_point_estimates.py --h-scale
+    predicted`` and without): the measured scale here against eq. (7)'s moved the median ΔE00
+    of all held-out films from 2.30 to 2.22 (radiative transfer) and from 2.36 to 2.32
+    (Kubelka-Munk). The MCMC study with it (``reports/colour-prediction.md``, 2026-12-04) gave
+    2.40 and 2.32, against 2.37 and 2.29 with eq. (7)'s scale here and the joint sampler
+    before its Gaussian block proposals (2026-12-02): the two changes are not separated there.
+    """
+    measured_scale = library.provenance.get("noise_scale", "model") == "measured"
+
     def misfit(log_h):
         h = np.array([np.exp(log_h)])
         total = 0.0
         for _, card, values in pairs:
             R = predict_reflectance(library, recipe, constants[None], h, instrument=instrument, substrate=card)[0]
-            total += float(np.sum((values / R - 1.0) ** 2))
+            total += float(np.sum(((values - R) / (values if measured_scale else R)) ** 2))
         return total
     result = optimize.minimize_scalar(misfit, bounds=np.log(THICKNESS_RANGE), method="bounded",
                                       options={"xatol": 1e-4})
@@ -161,7 +181,6 @@ def _fit_thickness(library, recipe, constants, instrument, pairs):
 def _build(task):
     """A library of the films ``films`` (a process task), on a base library when given."""
     sets, films, model, seed, base, settings, noise_scale = task
-    sets = _sets({f: sets[f] for f in films})
     return build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base,
                          settings=settings, noise_scale=noise_scale)
 
@@ -188,13 +207,18 @@ def predict_held_out(library, measurements, recipe, *, model, film_id, seed=0, n
         lab = colorimetry.reflectance_to_Lab(values, wl)
         return float(colorimetry.delta_E2000(colorimetry.reflectance_to_Lab(np.median(R, axis=0), wl), lab))
 
-    spectra, dE, dE_unknown = [], [], []
-    for _, card, values in pairs:
+    spectra, dE, dE_unknown, h_card, dE_card = [], [], [], [], []
+    for pair in pairs:
+        _, card, values = pair
         R = predict_reflectance(library, recipe, draws, np.full(n_draws, h), instrument=instrument, substrate=card)
         Ru = predict_reflectance(library, recipe, draws, h_unknown, instrument=instrument, substrate=card)
+        h_card.append(_fit_thickness(library, recipe, median, instrument, [pair]))
+        Rc = predict_reflectance(library, recipe, draws, np.full(n_draws, h_card[-1]), instrument=instrument,
+                                 substrate=card)
         spectra.append(R)
         dE.append(delta_E(R, values))
         dE_unknown.append(delta_E(Ru, values))
+        dE_card.append(delta_E(Rc, values))
     spectra = np.stack(spectra)
     measured = np.stack([values for _, _, values in pairs])
     residuals = measured / np.median(spectra, axis=1) - 1.0
@@ -208,29 +232,18 @@ def predict_held_out(library, measurements, recipe, *, model, film_id, seed=0, n
     return FilmPrediction(film_id, model, dict(recipe.amounts), tuple(name for name, _, _ in pairs), h, tuple(dE),
                           tuple(dE_unknown), residuals, spectra, measured, fractions,
                           match_dE, time.perf_counter() - started, not capped,
-                          float(wl[np.argmax(np.abs(residuals).max(axis=0))]))
+                          float(wl[np.argmax(np.abs(residuals).max(axis=0))]), tuple(h_card), tuple(dE_card))
 
 
 def _predict_film(task):
     """Build the leave-one-out library of one target and predict it (a process task)."""
     sets, film_id, model, seed, n_draws, films, base, settings, noise_scale = task
     started = time.perf_counter()
-    sets = _sets({f: sets[f] for f in (*films, film_id)})
     library = build_library({f: sets[f] for f in films}, model=model, seed=seed, progress=False, base=base,
                             settings=settings, noise_scale=noise_scale)
     recipe = film_recipes({film_id: sets[film_id]})[film_id]
     return predict_held_out(library, sets[film_id], recipe, model=model, film_id=film_id, seed=seed,
                             n_draws=n_draws, started=started)
-
-
-def _portable(sets):
-    """Film sets as plain fields for process tasks (a set's read-only metadata cannot be pickled)."""
-    return {f: portable_fields(ms) for f, ms in sets.items()}
-
-
-def _sets(portable):
-    """The film sets back from :func:`_portable`."""
-    return {f: MeasurementSet(**fields) for f, fields in portable.items()}
 
 
 def leave_one_out(measurements, *, targets=None, models=("radiative-transfer",), seed=0, executor=None,
@@ -275,14 +288,13 @@ def leave_one_out(measurements, *, targets=None, models=("radiative-transfer",),
         raise ValueError(f"targets: {unknown[0]!r} is not among the measurements")
     say = progress or (lambda message: None)
     started = time.perf_counter()
-    portable = _portable(sets)
     plans = {f: training_films(recipes, f, base) for f in targets}
     base_films = sorted({g for base_only, others in plans.values() if others for g in base_only})
     results = []
     with executor_or_local_pool(executor) as pool:
         bases = {}
         if base_films:
-            futures = {m: pool.submit(_build, (portable, base_films, m, seed, None, settings, noise_scale)) for m in models}
+            futures = {m: pool.submit(_build, ({f: sets[f] for f in base_films}, base_films, m, seed, None, settings, noise_scale)) for m in models}
             bases = {m: future.result() for m, future in futures.items()}
             say(f"base libraries ({', '.join(base) or 'none'} from {', '.join(base_films)}) built: "
                 f"{time.perf_counter() - started:.0f} s")
@@ -290,10 +302,11 @@ def leave_one_out(measurements, *, targets=None, models=("radiative-transfer",),
         for m in models:
             for f in targets:
                 base_only, others = plans[f]
-                if others:  # the target adds pigments to the base: share the base library
-                    tasks.append((portable, f, m, seed, n_draws, others, bases[m], settings, noise_scale))
-                else:  # a base-only target: its library is built without it from the others
-                    tasks.append((portable, f, m, seed, n_draws, base_only, None, settings, noise_scale))
+                # the target adds pigments to the base: share the base library; a base-only
+                # target: its library is built without it from the other base films
+                films, base_library = (others, bases[m]) if others else (base_only, None)
+                tasks.append(({g: sets[g] for g in (*films, f)}, f, m, seed, n_draws, films, base_library, settings,
+                              noise_scale))
         futures = [pool.submit(_predict_film, task) for task in tasks]
         for i, future in enumerate(futures, 1):
             p = future.result()

@@ -101,6 +101,7 @@ def pigment_report(library, pigment):
         lines += [f"Fitted in stage {stage.get('stage', '?')} with {', '.join(stage.get('pigments', ()))} from "
                   f"{len(stage.get('films', ()))} films (pigments of earlier stages fixed at their medians): "
                   f"{stage.get('n_steps', '?')} steps"
+                  + (f" after {stage['adaptation_rounds']} adaptation run(s)" if "adaptation_rounds" in stage else "")
                   + (" (capped: NOT converged)" if stage.get("max_steps_reached") else "")
                   + f", R-hat <= {rhat:.3f}, ESS >= {stage.get('constants_ess_min', np.nan):.0f} (constants), "
                   f"{stage.get('thickness_ess_min', np.nan):.0f} (thicknesses)"

@@ -53,16 +53,15 @@ import dataclasses
 import datetime
 import io
 import json
-import platform
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
 from .._atomic import write_file_set
 from .._json import jsonable as _jsonable
+from .._versions import package_versions
 from ..data.model import BLACK_SUBSTRATE_ALBEDO, WHITE_SUBSTRATE_ALBEDO
 from ..data.simulate import DESIGNS, FilmSpec
 from ..likelihood import Priors
@@ -596,9 +595,8 @@ class DesignResult:
 
 
 def _versions():
-    import scipy
-    return {"bayespig": __version__, "numpy": np.__version__, "scipy": scipy.__version__,
-            "python": platform.python_version()}
+    """The versions a design or comparison record names."""
+    return package_versions(("bayespig", "numpy", "scipy"), python=True)
 
 
 def rank_designs(candidates, prior=None, *, eps=0.05, n_draws=32, seed=0, objective="both",

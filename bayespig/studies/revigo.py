@@ -20,7 +20,6 @@ doi:10.1186/s40494-018-0181-6. Ershov, Voloboy & Pozdnyakov (2023), sections 2, 
 from __future__ import annotations
 
 import os
-import platform
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -29,6 +28,7 @@ import numpy as np
 
 from .._atomic import write_text_atomically
 from .._pool import executor_or_local_pool
+from .._versions import versions_text
 from ..colorimetry import delta_E2000
 from ..physics.fresnel import fresnel_reflectance
 from ..physics.mixtures import concentrations_from_mass_fractions
@@ -516,13 +516,8 @@ def _tint_posteriors(series, sets, idata, model, n_draws, seed):
 
 
 def _versions():
-    import colour
-    import scipy
-
-    from .. import __version__
-
-    return (f"bayespig {__version__}, numpy {np.__version__}, scipy {scipy.__version__}, "
-            f"colour-science {colour.__version__}, Python {platform.python_version()}")
+    """The versions the report's first lines name."""
+    return versions_text(("bayespig", "numpy", "scipy", "colour-science"))
 
 
 def _worst_band(prediction):

@@ -1,5 +1,7 @@
 """The measurement data model: geometry labels, validation on construction, substrates, methods."""
 
+import pickle
+
 import numpy as np
 import pytest
 
@@ -177,6 +179,19 @@ def test_equality_and_metadata_are_json():
     )
     with pytest.raises(MeasurementError, match="JSON"):
         MeasurementSet(WAVELENGTHS, [film("a")], metadata={"bad": object()})
+
+
+def test_a_set_pickles_as_it_is():
+    """Worker processes receive sets as they are (the library build, leave one film out)."""
+    original = MeasurementSet(WAVELENGTHS, [film("a")], n=1.5, metadata={"composition": {"W": 1.0}},
+                              source="films.csv")
+    original.sample("a")  # the name index is built lazily and must not travel
+    copy = pickle.loads(pickle.dumps(original))
+    assert copy == original
+    assert (copy.n, copy.source, dict(copy.metadata)) == (1.5, "films.csv", {"composition": {"W": 1.0}})
+    with pytest.raises(TypeError):
+        copy.metadata["composition"] = {}  # still read-only
+    assert copy.sample("a") == original.sample("a")
 
 
 # ------------------------------------------------------------------------------ substrates

@@ -9,7 +9,8 @@ from scipy import stats
 from bayespig.data import simulate
 from bayespig.inference import InferenceSettings, infer_problem
 from bayespig.inference.card_factors import CardFactorLogPosterior, CardFactors, card_indices
-from bayespig.inference.shared import JointLogPosterior, SharedParameter, adaptation_settled
+from bayespig.inference.shared import (MAX_ADAPTATION_ROUNDS, JointLogPosterior, SharedParameter,
+                                      adaptation_settled)
 from bayespig.likelihood import ForwardModel, Priors, Problem
 
 from .common import MC_Z
@@ -94,6 +95,10 @@ def test_the_joint_sampler_runs_any_list_of_specs(film):
     assert post["unseen"].attrs["long_name"] == "a parameter no value depends on"
     assert post["r_s_factor"].dims == ("chain", "draw", "card")
     assert idata.sample_stats["unseen_autocorr_time"].dims == ("unseen_index",)
+    # how many adaptation runs preceded the run proper, stored with the run
+    rounds = idata.sample_stats["adaptation_rounds"].values
+    assert rounds.shape == (problem.n_wavelengths,) and len(set(rounds)) == 1
+    assert 1 <= rounds[0] <= MAX_ADAPTATION_ROUNDS
     draws = post["unseen"].values[..., 0]
     ess = float(az.ess(draws))
     prior = stats.truncnorm(-TRUNCATION, TRUNCATION, scale=UNSEEN_SD)

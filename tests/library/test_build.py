@@ -13,6 +13,7 @@ from scipy import stats
 from bayespig.data import simulate
 from bayespig.data.simulate import FilmSpec
 from bayespig.inference import InferenceSettings
+from bayespig.inference.shared import MAX_ADAPTATION_ROUNDS
 from bayespig.library import PigmentLibrary, build_library, load_library, stage_plan
 from bayespig.library.build import IMPLAUSIBLE_SDS, implausible_factor
 from bayespig.library.recipes import Recipe
@@ -169,6 +170,7 @@ def test_the_library_recovers_known_constants(library, simulated):
     for stage in library.stages:
         assert not stage["max_steps_reached"]
         assert stage["thickness_rhat_max"] <= 1.01 and stage["thickness_ess_min"] >= 400
+        assert 1 <= stage["adaptation_rounds"] <= MAX_ADAPTATION_ROUNDS
     low, high = np.quantile(library.thickness, [0.05, 0.95], axis=0)
     truth = np.array([truth_h[f] for f in library.film_ids])
     assert ((low <= truth) & (truth <= high)).sum() >= stats.binom(truth.size, COVERAGE).ppf(COVERAGE_QUANTILE)
