@@ -7,7 +7,7 @@ import platform
 
 from . import __version__
 
-__all__ = ["RESULT_PACKAGES", "package_versions", "versions_text"]
+__all__ = ["RESULT_PACKAGES", "format_versions", "package_versions", "versions_text"]
 
 #: What a saved result (a posterior, a library, a study's record) names by default.
 RESULT_PACKAGES = ("bayespig", "numpy", "scipy", "emcee", "arviz")
@@ -33,7 +33,12 @@ def package_versions(names=RESULT_PACKAGES, *, python=False):
     return out
 
 
+def format_versions(versions):
+    """A mapping name -> version (:func:`package_versions`, or one a result recorded) as one line
+    of a report: ``"bayespig 0.1.0, numpy 2.4.6, ..., Python 3.11.7"``."""
+    return ", ".join(f"{'Python' if name == 'python' else name} {version}" for name, version in versions.items())
+
+
 def versions_text(names=RESULT_PACKAGES, *, python=True):
-    """The versions as one line of a report: ``"bayespig 0.1.0, numpy 2.4.6, ..., Python 3.11.7"``."""
-    return ", ".join(f"{'Python' if name == 'python' else name} {version}"
-                     for name, version in package_versions(names, python=python).items())
+    """The installed versions of ``names`` as one line of a report (:func:`format_versions`)."""
+    return format_versions(package_versions(names, python=python))

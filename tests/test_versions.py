@@ -6,7 +6,7 @@ import numpy as np
 import scipy
 
 import bayespig
-from bayespig._versions import RESULT_PACKAGES, package_versions, versions_text
+from bayespig._versions import RESULT_PACKAGES, format_versions, package_versions, versions_text
 
 
 def test_the_versions_are_those_of_the_imported_packages():
@@ -20,5 +20,6 @@ def test_the_versions_are_those_of_the_imported_packages():
 
 
 def test_the_report_line_names_python_last():
+    assert format_versions({"numpy": "2.0", "python": "3.11.7"}) == "numpy 2.0, Python 3.11.7"
     assert versions_text(("bayespig", "numpy")) == (f"bayespig {bayespig.__version__}, numpy {np.__version__}, "
                                                     f"Python {platform.python_version()}")

@@ -16,7 +16,7 @@ measured over its own black and white card on an 8°/d sphere.
    concentrations with the library's densities), with the library's joint draws
    (:func:`bayespig.library.predict.joint_constants`: the white and the black at the values
    the tinting pigment was fitted with, not their own independent draws). ``X``'s film
-   thickness is unknown; two variants:
+   thickness is unknown; three variants:
 
    * ``fitted`` (headline): the one free scalar, ``h``, fitted to ``X``'s two spectra by least
      squares in relative deviation with the median constants, each value's deviation relative
@@ -61,7 +61,7 @@ import re
 
 import numpy as np
 
-from .._versions import RESULT_PACKAGES, package_versions
+from .._versions import RESULT_PACKAGES, format_versions, package_versions
 from ..data.spectral_table import read_revigo
 from ..library.build import DEFAULT_NOISE_SCALE
 from ..library.recipes import film_recipes
@@ -304,5 +304,5 @@ def colour_prediction_report(study, *, command="bayespig colour-prediction"):
               "`bayespig.build_library`); every build's sampler: "
               + ", ".join(f"{k} {v}" for k, v in s.get("sampler", {}).items() if k in ("target_ess", "max_steps"))
               + (f"; {s['seconds'] / 60:.0f} min" if "seconds" in s else "")
-              + ("; " + ", ".join(f"{k} {v}" for k, v in s["versions"].items()) if "versions" in s else "") + ".", ""]
+              + ("; " + format_versions(s["versions"]) if "versions" in s else "") + ".", ""]
     return "\n".join(lines)

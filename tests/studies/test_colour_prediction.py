@@ -63,7 +63,7 @@ def test_the_report_states_every_thickness_variant_and_the_goals():
     assert "differ by more than a factor 2 for 1 of 3 films (bayespig) and 0 of 3 (Kubelka-Munk)" in text
     assert "| radiative-transfer | 5 / 6 | 83% |" in text
     assert text.rstrip().endswith("every build's sampler: target_ess 100.0, max_steps 6000; 30 min; bayespig 0.1.0, "
-                                  "python 3.11.7.")
+                                  "Python 3.11.7.")
     row = next(line for line in text.splitlines() if line.startswith("| 06D |"))
     assert "2.50 / 3.00 (0.29, 6.4); 3.00 / 3.00 (0.9, 1.1)" in row
     assert re.search(r"\| 06D \| black shade \| Vermillion 0\.990, BoneBlack 0\.010 \| 5\.00 / 6\.00 \| 6\.00 / 6\.00 \|",
