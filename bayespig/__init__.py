@@ -1,17 +1,9 @@
 """bayespig: pigment optical properties from paint-film measurements, with honest uncertainty."""
 
-from .physics.forward import (
-    brdf,
-    hemispherical_reflectance,
-    optical_thickness_from_transmittance,
-    specular_transmittance,
-)
-
-__version__ = "0.1.0"
-
-from .data import MeasurementError, MeasurementSet, read_measurements, simulate  # noqa: E402
-from .fit import fit_measurements, fit_problem  # noqa: E402
-from .inference import (  # noqa: E402
+from ._versions import __version__
+from .data import MeasurementError, MeasurementSet, read_measurements, simulate
+from .fit import fit_measurements, fit_problem
+from .inference import (
     ConvergenceWarning,
     InferenceSettings,
     diagnose,
@@ -20,10 +12,16 @@ from .inference import (  # noqa: E402
     save_inference,
     summarize,
 )
-from .instruments import get_instrument, predict  # noqa: E402  (table needs __version__)
-from .library import build_library, load_library, match_paint, predict_paint  # noqa: E402
-from .studies.robustness import robustness_study  # noqa: E402
-from .table import load_table  # noqa: E402
+from .instruments import get_instrument, predict
+from .library import build_library, load_library, match_paint, predict_paint
+from .physics.forward import (
+    brdf,
+    hemispherical_reflectance,
+    optical_thickness_from_transmittance,
+    specular_transmittance,
+)
+from .studies.robustness import robustness_study
+from .table import load_table
 
 __all__ = [
     "ConvergenceWarning",

@@ -5,9 +5,10 @@ from __future__ import annotations
 import importlib.metadata
 import platform
 
-from . import __version__
+__all__ = ["RESULT_PACKAGES", "__version__", "format_versions", "package_versions", "versions_text"]
 
-__all__ = ["RESULT_PACKAGES", "format_versions", "package_versions", "versions_text"]
+#: bayespig's version: the one place it is written (``pyproject.toml`` reads it from here).
+__version__ = "0.1.0"
 
 #: What a saved result (a posterior, a library, a study's record) names by default.
 RESULT_PACKAGES = ("bayespig", "numpy", "scipy", "emcee", "arviz")

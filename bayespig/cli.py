@@ -21,7 +21,7 @@ import warnings
 
 import numpy as np
 
-from . import __version__
+from ._versions import __version__
 from .commands._arguments import (
     add_film_state_arguments,
     add_input_argument,

@@ -69,10 +69,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
 from ._atomic import atomic_path
 from ._pool import executor_or_local_pool
 from ._validation import integer, real_scalar
+from ._versions import __version__
 from .instruments import Instrument, channel_directions, get_instrument
 from .physics.forward import specular_port_reflectance, surface_terms
 from .physics.microfacet import _flake_reflection, _reflection, directional_albedo

@@ -44,10 +44,10 @@ except ImportError:
 
 import numpy as np
 
-from . import __version__
 from ._atomic import atomic_path
 from ._pool import executor_or_local_pool
 from ._validation import broadcast, choice, integer, real_array, real_scalar
+from ._versions import __version__
 from .instruments import Instrument, channel_directions, get_instrument
 from .physics.adding_doubling import (
     START_THICKNESS,

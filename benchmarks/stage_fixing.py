@@ -10,10 +10,14 @@ tinting pigment from the other films of its series; the leave-one-out sampler se
 with the MCMC of :func:`bayespig.build_library`, and with each stage's posterior replaced by its
 joint least-squares start (``benchmarks/loo_point_estimates.py``). Prints both predictions of
 the film, the tinting pigment's constants per band (point fit; MCMC median and 90 % interval),
-and how far the MCMC's fixed white and black (the draw nearest their marginal medians that the
-later stage is conditioned on) lie from the point fit.
+and how far the MCMC's fixed white and black (what the later stage is conditioned on) lie from
+the point fit's.
 
-Measured (2026-12-04, session 17; ΔE00 over black / white):
+Since the MCMC build fixes each earlier stage at its joint least-squares point
+(``provenance["stage_points"]``, :mod:`bayespig.library.build`, "Stages"), the two builds fix the
+same white and black and the last lines read 0: what remains is the held-out film's stage, its
+posterior against its point. Measured before that, when the MCMC build fixed the draw nearest
+the marginal medians (session 17; ΔE00 over black / white):
 
 - 03D (this script, about 6 min on 2 cores): MCMC 3.03 / 9.74, point 1.17 / 1.80; Eosin2PbWax
   ``log sigma`` at 400-460 nm MCMC median +2.1 ... +6.0 (90 % interval as narrow as [5.99,

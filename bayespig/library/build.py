@@ -60,8 +60,9 @@ thicknesses) is too big for the block sampler, so the library is built in stages
    Revigo: ZincWhite and BoneBlack; ``base_pigments=`` overrides) jointly, from the films made
    of base pigments only;
 2. repeatedly, every pigment that is the only not-yet-fitted pigment of some remaining films,
-   from those films, the pigments fitted before *fixed at one joint draw nearest their medians* (:func:`representative_draw`); pigments of
-   one stage are independent groups, run in parallel through the executor;
+   from those films, the pigments fitted before *fixed at their own stage's joint least-squares
+   point* (``provenance["stage_points"]``, see "Stages" below); pigments of one stage are
+   independent groups, run in parallel through the executor;
 3. whatever is left (films with two or more unfitted pigments, none of which can be isolated):
    their pigments jointly, per connected group.
 
@@ -84,6 +85,28 @@ below by its films), its median is a poor point to fix, and the later films it t
 be fitted worse than their noise: each film's ``rms_log_deviation`` shows it (simulated: a white
 of ``tau ~ 15`` left a 10 % tint at 5.8 % rms against 1 % noise; at ``tau ~ 7`` all films fit
 to 0.1-1.3 %).
+
+Which point: each stage's joint least-squares fit (:func:`joint_least_squares_start`, the
+constants and thicknesses at the cards as measured; the same fit that starts the stage's
+walkers), recorded as ``provenance["stage_points"]`` and inherited from a base library. Until
+2026-12-04 it was the stage's draw nearest its marginal medians (:func:`representative_draw`).
+Where the earlier films identify the constants the two are a fraction of a posterior sd apart
+(simulated, ``tests/library/test_build.py``: at most 0.13 sd). Where they do not, the draw
+is one arbitrary point of a flat direction, the fit the one the films' own residuals single
+out, and the later pigment fitted on the draw follows it there: Revigo 03D's eosin ``log sigma``
+at 400-460 nm went to +2 ... +6 on the draw against -1.3 on the fit, the white's and black's
+``log sigma`` being up to 7.7 apart at 410 nm (``benchmarks/stage_fixing.py``). Leave one film
+out, ΔE00 over black / white on the draw -> on the fit (10 films, leave-one-out settings):
+01C 15.08 / 13.92 -> 10.16 / 9.19, 02C 10.00 / 8.11 -> 7.26 / 6.18, 03C 3.30 / 3.75 -> 1.77 /
+2.61, 03D 3.03 / 9.74 -> 1.10 / 1.80, 11D 3.81 / 4.97 -> 2.92 / 1.20; worse: 12C 3.23 / 4.57
+-> 1.58 / 5.42, 09C 3.33 / 2.23 -> 3.63 / 3.62. All 54 mixture films of series 01-15 (``bayespig
+colour-prediction``, ``reports/colour-prediction.md``), median ΔE00 white tints / black shades /
+all, fitted thickness: 2.71 / 2.02 / 2.40 -> 2.52 / 1.77 / 2.28 (Kubelka-Munk 2.49 / 1.84 / 2.32
+-> 2.49 / 1.83 / 2.32); 31 films better, 19 worse, the worst 12D (5.88 / 5.94 -> 10.74 /
+10.71: the cobalt blue fitted on the point predicts the shade too dark at 400 nm, and its
+fitted thickness runs to 29) and 15C (3.94 / 3.52 -> 5.63 / 5.07). The 90 % predictive
+regions cover 99 % of the cards against 94 % before: too wide now (their model error is
+learned from the other films' residuals).
 
 Measured on the 84 Revigo films (``benchmarks/library.py``, 2 cores shared with other work, load
 average 6-9): stage 1 (ZincWhite, BoneBlack from 07A, 07C-07F) needs 19 576 steps (877 s) to
@@ -439,10 +462,12 @@ def concentration_factor_spec(films, film_concentrations, pigments, concentratio
 def representative_draw(constants):
     """Index of the draw nearest the marginal medians (every coordinate in units of its sd).
 
-    The constants an earlier stage hands to the later ones: one *joint* draw, so that correlated
-    constants (a white's ``sigma`` and a black's along their films' thickness ravine) stay
-    consistent with each other, which the marginal medians are not (simulated white + black:
-    fixing their marginal medians mispredicted a 50/50 tint by 47 %, this draw by ~1 %).
+    What a later build fixes a *base library's* pigments at when that library was saved without
+    its stage points (``provenance["stage_points"]``, recorded since 2026-12-04; see "Stages" in
+    the module docstring). One *joint* draw, so that correlated constants (a white's ``sigma``
+    and a black's along their films' thickness ravine) stay consistent with each other, which
+    the marginal medians are not (simulated white + black: fixing their marginal medians
+    mispredicted a 50/50 tint by 47 %, this draw by ~1 %).
 
     Parameters
     ----------
@@ -692,6 +717,7 @@ def _fit_group(task):
     return {
         "pigments": task["pigments"], "films": task["films"], "stage": task["stage"],
         "constants": constants, "thickness": thickness, "rms_log_deviation": rms,
+        "point": centre.reshape(layout.n_wavelengths, len(layout.fitted), 2),
         "cards": film_cards, "card_factors": card_draws,
         "concentration_labels": () if concentration_spec is None else tuple(
             zip(concentration_spec.films, concentration_spec.pigments)),
@@ -810,7 +836,8 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
     if any(w.shape != wavelengths[0].shape or not np.allclose(w, wavelengths[0]) for w in wavelengths):
         raise ValueError("measurements: every film must be measured at the same wavelengths")
     known = ()
-    medians = {}  # pigment -> (n_wl, 2)
+    medians = {}  # pigment -> (n_wl, 2): the values later stages fix it at
+    stage_points = {}  # pigment -> (n_wl, 2): its stage's joint least-squares point
     if base is not None:
         if not isinstance(base, PigmentLibrary):
             raise TypeError(f"base must be a PigmentLibrary, got {type(base).__name__}")
@@ -821,9 +848,12 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
         known = tuple(base.pigments)
         if base_pigments is None:  # the base library's pigments are the base: no base stage here
             base_pigments = ()
+        inherited_points = base.provenance.get("stage_points") or {}
         k = representative_draw(base.constants)
         for j, p in enumerate(base.pigments):
-            medians[p] = base.constants[k, :, j]
+            medians[p] = (np.asarray(inherited_points[p], dtype=float) if p in inherited_points
+                          else base.constants[k, :, j])
+            stage_points[p] = medians[p]
     stages, unused = stage_plan(recipes, base_pigments, known=known)
     # what every fitted pigment was conditioned on (the fixed pigments of its group) and the values it was
     # fixed at: a prediction pairs its draws with those values (bayespig.library.predict.joint_constants)
@@ -878,9 +908,8 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
                     report(future.result())
                 done = [f.result() for f in futures]
         for result in done:
-            k = representative_draw(result["constants"])
             for j, p in enumerate(result["pigments"]):
-                medians[p] = result["constants"][k, :, j]
+                medians[p] = stage_points[p] = result["point"][:, j]
         if progress:
             print(f"library stage {s}/{len(stages)} done in {time.perf_counter() - stage_start:.1f} s",
                   file=sys.stderr, flush=True)
@@ -890,8 +919,9 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
                         concentration_sd)
     conditioning = {"conditioned_on": conditioned_on,
                     "fixed_constants": {p: np.asarray(v, dtype=float).tolist() for p, v in fixed_constants.items()}}
-    return dataclasses.replace(library, provenance={**library.provenance, "conditioning": conditioning,
-                                                    "noise_scale": noise_scale})
+    return dataclasses.replace(library, provenance={
+        **library.provenance, "conditioning": conditioning, "noise_scale": noise_scale,
+        "stage_points": {p: np.asarray(v, dtype=float).tolist() for p, v in stage_points.items()}})
 
 
 def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, settings, eps, densities,

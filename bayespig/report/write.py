@@ -780,7 +780,7 @@ def _build(idata, measurements, *, observer, illuminant, title, corner_wavelengt
     prov_text = json.dumps(_jsonable(_shown_provenance(prov)), indent=2, sort_keys=True, default=str)
     blocks.append(doc.preformatted(prov_text))
     created = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
-    from .. import __version__
+    from .._versions import __version__
 
     blocks.append(doc.paragraph(f"Report written {created} by bayespig {__version__}."))
 

@@ -145,7 +145,7 @@ def write_posterior_tables(path="reports/posterior-robustness.md", *, seed=0, ep
     list of dict
         The records.
     """
-    from .. import __version__
+    from .._versions import __version__
     from ..inference import InferenceSettings
 
     started = time.perf_counter()

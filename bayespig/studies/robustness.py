@@ -39,10 +39,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
 from .._atomic import atomic_path, write_text_atomically
 from .._pool import executor_or_local_pool
 from .._validation import integer
+from .._versions import __version__
 from ..data.model import BLACK_SUBSTRATE_ALBEDO, WHITE_SUBSTRATE_ALBEDO
 from ..data.simulate import DESIGNS
 from ..fit import FitSettings, film_term, fit_batch
