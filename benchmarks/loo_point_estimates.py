@@ -146,6 +146,16 @@ def main():
                 m = [np.median(v) for v in (values["white tint"], values["black shade"],
                                             values["white tint"] + values["black shade"])]
                 print(f"{model:20s} {variant:10s} {m[0]:11.2f} {m[1]:12.2f} {m[2]:6.2f}")
+    # the 90 % regions (16 draws per card here): uncalibrated (kappa = 1) and calibrated
+    counts, _, _ = validation.coverage(predictions, wl, level=0.9, seed=0)
+    for model in MODELS:
+        own = [p for p in predictions if p.model == model]
+        scores, _ = validation.conformal_scores(own, wl, 0.9, np.random.default_rng(0))
+        values = np.array(list(scores.values()))
+        hits, total = counts[model]
+        print(f"{model:20s} 90 % regions: {np.sum(values <= 1.0)} / {values.size} inside at kappa = 1, "
+              f"{hits} / {total} calibrated (each film's kappa from the others); kappa of all "
+              f"{validation.calibration_factor(values, 0.9):.2f}, median score {np.median(values):.2f}")
 
 
 if __name__ == "__main__":

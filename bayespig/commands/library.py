@@ -135,6 +135,11 @@ def add_library_parsers(subparsers):
     build.add_argument("--noise-scale", choices=NOISE_SCALES, default=DEFAULT_NOISE_SCALE,
                        help="what the relative error eps is relative to: the measured value (default) or the "
                        "predicted one (eq. 7); they differ on films the model cannot reproduce")
+    build.add_argument("--cross-validate", action="store_true",
+                       help="also predict each mixture film by a library built without it and store the model "
+                       "error learned from those predictions (calibrated to hold 90 %% of them), which 'bayespig "
+                       "predict' adds to its region; one more build per mixture film (leave-one-out sampler "
+                       "settings, without card or concentration factors)")
     add_verbosity_arguments(build)
     build.set_defaults(func=run_library_build)
 
@@ -214,25 +219,39 @@ def run_library_build(args):
     from ..inference.arguments import check_substrate_sd
     from ..inference.concentration_factors import check_concentration_sd
     from ..library import build_library
+    from ..library.recipes import film_recipes
+    from ..library.validation import cross_validate
 
     substrate_sd = check_substrate_sd(args.substrate_sd)  # before any file is read: infer's message
     concentration_sd = check_concentration_sd(args.concentration_sd)
     path = Path(args.measurements)
-    sets = read_revigo(path) if path.is_dir() else path
+    sets = read_revigo(path) if path.is_dir() or args.cross_validate else path
     if args.films and isinstance(sets, dict):
         wanted = [f.strip() for f in args.films.split(",") if f.strip()]
         missing = [f for f in wanted if f not in sets]
         if missing:
             raise ValueError(f"--films: {missing[0]!r} is not a film of {path}")
         sets = {f: sets[f] for f in wanted}
+    if args.cross_validate:  # before any build: the held-out films it needs
+        mixtures = [f for f, recipe in film_recipes(sets).items() if len(recipe.amounts) >= 2]
+        if len(mixtures) < 2:
+            raise ValueError(f"--cross-validate needs at least two mixture films (two or more pigments); "
+                             f"{path} has {len(mixtures)}{': ' + mixtures[0] if mixtures else ''}")
     library = build_library(sets, model=args.model, seed=args.seed, progress=_say(args) or False,
                             substrate_sd=substrate_sd, concentration_sd=concentration_sd,
                             noise_scale=args.noise_scale)
+    if args.cross_validate:
+        library, predictions = cross_validate(library, sets, seed=args.seed, progress=_say(args))
+        calibration = library.provenance["model_error"]["calibration"]
+        print(f"model error from {len(predictions)} held-out films"
+              + (f", calibration factor {calibration['factor']:.2f} at {calibration['level']:.0%}"
+                 if calibration else " (too few bands for a colour: not calibrated)"))
     library.save(args.out)
     print(f"wrote {args.out}: {len(library.pigments)} pigments ({', '.join(library.pigments)}), "
           f"{library.wavelength_nm.size} wavelengths, model {library.model}"
           + ("" if substrate_sd is None else f", card factors (prior sd {substrate_sd:g} in log f)")
-          + ("" if concentration_sd is None else f", concentration factors (prior sd {concentration_sd:g} in log f)"))
+          + ("" if concentration_sd is None else f", concentration factors (prior sd {concentration_sd:g} in log f)")
+          + ("" if library.model_error is None else ", cross-validated model error"))
     return 0
 
 

@@ -62,7 +62,8 @@ class PigmentLibrary:
         Pigment densities given to the build [g/cm^3].
     model_error : numpy.ndarray or None
         The model error learned by cross-validation (:func:`bayespig.library.validation.cross_validate`):
-        the covariance over wavelengths of relative residuals (n_wl, n_wl), or a per-wavelength
+        the covariance over wavelengths of relative residuals (n_wl, n_wl), scaled by its
+        calibration factor (``provenance["model_error"]["calibration"]``), or a per-wavelength
         relative sd (n_wl,); None until then (predictions then hold the constants' uncertainty only).
     provenance : dict
         Seed, settings, package versions, stage plan.

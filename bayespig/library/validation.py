@@ -14,8 +14,10 @@ predicted. For each target film ``X`` (default: every film with two or more pigm
    pigments at the values the other pigments were fitted with), and
    also drawn from the library's own films (nothing of ``X`` used but its recipe and cards);
 3. the relative residuals ``measured / predicted - 1`` over all targets give the model-error
-   covariance over wavelengths (:func:`bayespig.library.predict.model_error_from_residuals`);
-   for the coverage of ``X``'s region only the *other* targets' residuals are used.
+   covariance over wavelengths (:func:`bayespig.library.predict.model_error_from_residuals`),
+   scaled by its split-conformal calibration factor
+   (:func:`bayespig.library.predict.calibration_factor`); for the coverage of ``X``'s region
+   only the *other* targets' residuals and scores are used.
 
 The films are measured over cards (a film sample whose substrate is a measured substrate sample
 of its set, e.g. a Revigo drawdown over its black and white cards), with a hemispherical
@@ -35,13 +37,22 @@ from .._pool import executor_or_local_pool
 from ..inference.settings import InferenceSettings
 from .build import DEFAULT_NOISE_SCALE, _base_pigments, build_library, check_noise_scale
 from .match import match_paint
-from .predict import DEFAULT_LEVEL, joint_constants, model_error_from_residuals, predict_reflectance
+from .predict import (
+    DEFAULT_LEVEL,
+    calibration_factor,
+    credible_region,
+    joint_constants,
+    model_error_from_residuals,
+    predict_reflectance,
+    with_model_error,
+)
 from .recipes import film_recipes
 
 __all__ = [
     "LOO_SETTINGS",
     "FilmPrediction",
     "card_spectra",
+    "conformal_scores",
     "coverage",
     "cross_validate",
     "leave_one_out",
@@ -319,8 +330,50 @@ def leave_one_out(measurements, *, targets=None, models=("radiative-transfer",),
                             "seconds": time.perf_counter() - started}
 
 
+def conformal_scores(predictions, wavelength_nm, level, rng):
+    """The held-out cards' scores for :func:`~bayespig.library.predict.calibration_factor`.
+
+    Parameters
+    ----------
+    predictions : sequence of FilmPrediction
+        Held-out films of *one* film model.
+    wavelength_nm : numpy.ndarray
+    level : float
+        Probability content of the regions (0 < level < 1).
+    rng : numpy.random.Generator
+        Draws the model errors.
+
+    Returns
+    -------
+    tuple
+        ``(scores, covariances)``: (film, card index) -> ΔE00 of the measured colour from the
+        centre of the film's uncalibrated region (model error from the *other* films' residuals)
+        over that region's radius [-]; film -> that covariance.
+    """
+    scores, covariances = {}, {}
+    for p in predictions:
+        others = [q.residuals for q in predictions if q.film_id != p.film_id]
+        if not others:
+            continue
+        covariances[p.film_id] = model_error_from_residuals(np.concatenate(others))
+        for k in range(p.draws.shape[0]):
+            _, _, centre, r = credible_region(with_model_error(p.draws[k], covariances[p.film_id], rng),
+                                              wavelength_nm, level)
+            measured = colorimetry.reflectance_to_Lab(p.measured[k], wavelength_nm)
+            scores[(p.film_id, k)] = float(colorimetry.delta_E2000(measured, centre)) / r
+    return scores, covariances
+
+
 def coverage(predictions, wavelength_nm, *, level=DEFAULT_LEVEL, seed=0):
     """Whether each held-out film lies in its predictive region, the model error learned without it.
+
+    Film ``X``'s region is :func:`bayespig.predict_paint`'s with the model error of a library
+    cross-validated on the other films only: their residuals' covariance ``C``
+    (:func:`~bayespig.library.predict.model_error_from_residuals`) times ``kappa^2``, ``kappa``
+    the calibration factor of the other films' scores
+    (:func:`~bayespig.library.predict.calibration_factor`). Each of those scores comes from a
+    region whose ``C`` leaves out only its own film, so ``X``'s residuals are one film's share of
+    them (Revigo: 1 of 53); a nested leave-one-out would remove that too.
 
     Returns
     -------
@@ -332,20 +385,16 @@ def coverage(predictions, wavelength_nm, *, level=DEFAULT_LEVEL, seed=0):
     rng = np.random.default_rng(seed)
     for model in sorted({p.model for p in predictions}):
         own = [p for p in predictions if p.model == model]
+        scores, covariances = conformal_scores(own, wavelength_nm, level, rng)
         hits = total = 0
         for p in own:
-            others = [q.residuals for q in own if q.film_id != p.film_id]
+            others = [v for (f, _), v in scores.items() if f != p.film_id]
             if not others:
                 continue
-            covariance = model_error_from_residuals(np.concatenate(others))
+            covariance = calibration_factor(others, level) ** 2 * covariances[p.film_id]
             flags, radii = [], []
             for k in range(p.draws.shape[0]):
-                R = p.draws[k]
-                noise = rng.multivariate_normal(np.zeros(covariance.shape[0]), covariance, R.shape[0], method="eigh")
-                R = np.clip(R * (1.0 + noise), 0.0, None)
-                lab = colorimetry.reflectance_to_Lab(R, wavelength_nm)
-                centre = colorimetry.reflectance_to_Lab(np.median(R, axis=0), wavelength_nm)
-                r = float(np.quantile(colorimetry.delta_E2000(lab, centre), level))
+                _, _, centre, r = credible_region(with_model_error(p.draws[k], covariance, rng), wavelength_nm, level)
                 measured = colorimetry.reflectance_to_Lab(p.measured[k], wavelength_nm)
                 flag = bool(colorimetry.delta_E2000(measured, centre) <= r)
                 flags.append(flag)
@@ -359,8 +408,13 @@ def coverage(predictions, wavelength_nm, *, level=DEFAULT_LEVEL, seed=0):
 
 
 def cross_validate(library, measurements, *, seed=0, executor=None, progress=None, settings=LOO_SETTINGS,
-                   targets=None):
+                   targets=None, level=DEFAULT_LEVEL):
     """``library`` with the model error learned by leaving out each mixture film of ``measurements``.
+
+    The model error is the held-out films' residual covariance times ``kappa^2``, ``kappa`` its
+    split-conformal calibration at ``level`` (:func:`~bayespig.library.predict.calibration_factor`;
+    recorded in ``provenance["model_error"]["calibration"]``; None, ``kappa = 1``, with fewer
+    bands than a colour needs, :data:`bayespig.colorimetry.MIN_WAVELENGTHS`).
 
     Parameters
     ----------
@@ -368,6 +422,8 @@ def cross_validate(library, measurements, *, seed=0, executor=None, progress=Non
         Built from ``measurements`` (its model is the one cross-validated).
     measurements : dict
         The films it was built from.
+    level : float
+        Probability content the calibrated regions of :func:`bayespig.predict_paint` hold.
 
     Returns
     -------
@@ -381,7 +437,15 @@ def cross_validate(library, measurements, *, seed=0, executor=None, progress=Non
     if len(predictions) < 2:
         raise ValueError("cross-validation needs at least two mixture films")
     covariance = model_error_from_residuals(np.concatenate([p.residuals for p in predictions]))
+    if library.wavelength_nm.size >= colorimetry.MIN_WAVELENGTHS:
+        scores, _ = conformal_scores(predictions, library.wavelength_nm, level, np.random.default_rng(seed))
+        kappa = calibration_factor(list(scores.values()), level)
+        calibration = {"method": "split-conformal, normalised ΔE00 score (bayespig.library.predict."
+                                 "calibration_factor)", "factor": kappa, "level": float(level), "cards": len(scores)}
+    else:  # too few bands for a colour: no ΔE00 to calibrate on
+        kappa, calibration = 1.0, None
     provenance = dict(library.provenance, model_error={
         "method": "leave one film out (bayespig.library.validation)", "films": [p.film_id for p in predictions],
-        "seed": int(seed), "settings": dataclasses.asdict(settings)})
+        "seed": int(seed), "settings": dataclasses.asdict(settings), "calibration": calibration})
+    covariance = kappa ** 2 * covariance
     return dataclasses.replace(library, model_error=covariance, provenance=provenance), predictions

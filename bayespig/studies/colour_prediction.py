@@ -40,10 +40,11 @@ measured over its own black and white card on an 8°/d sphere.
    card (D65, CIE 1964 10°).
 5. **Model error and coverage**: the relative residuals ``measured / predicted - 1`` of all
    held-out films give the model-error covariance over wavelengths
-   (:func:`bayespig.library.predict.model_error_from_residuals`). For the coverage of ``X``'s
-   90 % region the covariance comes from the *other* films only (no film calibrates its own
-   region), and the region is that of :func:`bayespig.predict_paint`: posterior draws of the
-   constants times the model error.
+   (:func:`bayespig.library.predict.model_error_from_residuals`), scaled by its split-conformal
+   calibration factor (:func:`bayespig.library.predict.calibration_factor`). For the coverage of
+   ``X``'s 90 % region the covariance and the factor come from the *other* films only (no film
+   calibrates its own region), and the region is that of :func:`bayespig.predict_paint`:
+   posterior draws of the constants times the model error.
 6. **Matching**: each target matched from its leave-one-out library with its own pigments
    allowed (:func:`bayespig.match_paint`, its over-white spectrum as the target, thickness
    fitted): recovered mass fractions against the recipe and the ΔE00 of the match.
@@ -257,7 +258,9 @@ def colour_prediction_report(study, *, command="bayespig colour-prediction"):
               f"{len(study.of(km))} (Kubelka-Munk), where the thickness absorbs a model error rather than "
               "measuring the paint.", ""]
     lines += ["## Coverage of the 90 % predictive regions", "",
-              "The model error of film X's region is learned from the residuals of the other held-out films only.", "",
+              "The model error of film X's region is learned from the other held-out films only: their residuals' "
+              "covariance, scaled by its split-conformal calibration factor on the other films' scores "
+              "(`bayespig.library.predict.calibration_factor`).", "",
               "| model | inside / total | coverage |", "|---|---|---|"]
     for model, (hits, total) in study.coverage.items():
         lines.append(f"| {model} | {hits} / {total} | {hits / total:.0%} |")

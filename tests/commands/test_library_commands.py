@@ -6,6 +6,7 @@ import pytest
 from bayespig.cli import main
 from bayespig.commands.library import recipe_argument, spectrum_argument
 from bayespig.library.library import PigmentLibrary
+from bayespig.studies.revigo import default_revigo_path
 
 WL = np.arange(400.0, 701.0, 50.0)
 PIGMENTS = ("ZincWhite", "PrussianBlue")
@@ -98,4 +99,22 @@ def test_library_build_refuses_an_unknown_noise_scale_in_one_line(tmp_path, caps
     err = capsys.readouterr().err.strip().splitlines()[-1]
     # argparse's wording of the choices differs between Python versions; the argument and value do not
     assert "argument --noise-scale: invalid choice: 'data'" in err and "measured" in err and "model" in err
+    assert not out.exists()
+
+
+REVIGO = default_revigo_path()
+needs_revigo = pytest.mark.skipif(not (REVIGO / "revigo-mixture-specifications.txt").exists(),
+                                  reason=f"Revigo data not found at {REVIGO} (set BAYESPIG_REVIGO)")
+
+
+@needs_revigo
+def test_library_build_refuses_to_cross_validate_one_mixture_before_building(tmp_path, capsys):
+    """``--cross-validate`` needs two held-out mixture films: said before any build, nothing written
+    (07A is zinc white alone, 07C its grey with bone black)."""
+    out = tmp_path / "library.nc"
+    assert main(["library", "build", str(REVIGO), "--films", "07A,07C", "--cross-validate", "--out", str(out),
+                 "-q"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"bayespig: error: --cross-validate needs at least two mixture films (two or more pigments); {REVIGO} "
+        "has 1: 07C")
     assert not out.exists()

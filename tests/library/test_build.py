@@ -265,6 +265,7 @@ def test_cross_validation_learns_a_model_error(simulated):
     rms = np.sqrt(np.mean(np.concatenate(residuals) ** 2, axis=0))
     np.testing.assert_allclose(np.sqrt(np.diag(validated.model_error)), rms, rtol=1e-12)
     assert validated.provenance["model_error"]["films"] == ["RW2", "RB"]
+    assert validated.provenance["model_error"]["calibration"] is None  # three bands: no ΔE00 to calibrate on
     assert validated.model_error is not None and library.model_error is None
 
 
