@@ -188,6 +188,7 @@ __all__ = [
     "BASE_SHARE",
     "DEFAULT_SETTINGS",
     "IMPLAUSIBLE_SDS",
+    "LIBRARY_EPS",
     "START_BALL_SD",
     "DEFAULT_NOISE_SCALE",
     "LibraryLayout",
@@ -216,6 +217,8 @@ NOISE_SCALES = ("measured", "model")
 DEFAULT_NOISE_SCALE = "measured"
 #: Default base pigments: those with a nonzero amount in at least this share of the films.
 BASE_SHARE = 0.25
+#: Default relative error of every film value (:func:`build_library`'s ``eps``).
+LIBRARY_EPS = 0.02
 #: Sampler settings of every stage's run (the library's draws: n_ensembles * draws_per_chain).
 DEFAULT_SETTINGS = InferenceSettings(target_ess=400.0, draws_per_chain=256, max_steps=20000)
 #: Sd of the walkers' start ball around the least-squares fit, in the sampled coordinates
@@ -750,7 +753,7 @@ def _read_measurements(measurements):
 
 
 def build_library(measurements, *, model="radiative-transfer", seed=0, executor=None, progress=True,
-                  densities=None, eps=0.02, base_pigments=None, thickness=None, settings=None, base=None,
+                  densities=None, eps=LIBRARY_EPS, base_pigments=None, thickness=None, settings=None, base=None,
                   substrate_sd=None, concentration_sd=None, noise_scale=DEFAULT_NOISE_SCALE):
     """A pigment library from films of known recipes (see the module docstring for the stages).
 

@@ -9,7 +9,8 @@ predicted. For each target film ``X`` (default: every film with two or more pigm
    films are fitted once (a base library, :func:`bayespig.build_library`'s ``base=``) and shared
    by every target that is not one of them;
 2. ``X`` is predicted from its recipe over each of its measured cards, its unknown thickness
-   the one free scalar (fitted to its spectra in relative deviation, median constants), with
+   the one free scalar (fitted to its spectra in relative deviation under the library's
+   thickness prior, median constants), with
    the library's joint draws (:func:`bayespig.library.predict.joint_constants`: the base
    pigments at the values the other pigments were fitted with), and
    also drawn from the library's own films (nothing of ``X`` used but its recipe and cards);
@@ -35,7 +36,7 @@ from scipy import optimize
 from .. import colorimetry
 from .._pool import executor_or_local_pool
 from ..inference.settings import InferenceSettings
-from .build import DEFAULT_NOISE_SCALE, _base_pigments, build_library, check_noise_scale
+from .build import DEFAULT_NOISE_SCALE, LIBRARY_EPS, _base_pigments, build_library, check_noise_scale
 from .match import match_paint
 from .predict import (
     DEFAULT_LEVEL,
@@ -163,28 +164,38 @@ def training_films(recipes, target, base_pigments):
     return base_only, tuple(f for f in films if f not in base_only)
 
 
-def _fit_thickness(library, recipe, constants, instrument, pairs):
-    """The one free scalar: relative thickness minimising the relative misfit over every card.
+def _fit_thickness(library, recipe, constants, instrument, pairs, prior=True):
+    """The one free scalar: the held-out film's relative thickness, at the mode of its posterior.
 
-    The misfit is that of the library's own likelihood: each value's deviation relative to the
-    measured value, or to the predicted one for a library built with eq. (7)'s scale
-    (``provenance["noise_scale"]``, :data:`bayespig.library.build.NOISE_SCALES`; a library saved
-    without it predates the measured scale and used eq. 7's). Revigo series 01-15, point
-    estimates of every leave-one-out library (``benchmarks/loo_point_estimates.py --h-scale
-    predicted`` and without): the measured scale here against eq. (7)'s moved the median ΔE00
-    of all held-out films from 2.30 to 2.22 (radiative transfer) and from 2.36 to 2.32
-    (Kubelka-Munk). The MCMC study with it (``reports/colour-prediction.md``, 2026-12-04) gave
-    2.40 and 2.32, against 2.37 and 2.29 with eq. (7)'s scale here and the joint sampler
-    before its Gaussian block proposals (2026-12-02): the two changes are not separated there.
+    The misfit is that of the library's own likelihood, each value's deviation standardized by
+    ``eps`` (``provenance["eps"]``) relative to the measured value, or to the predicted one for a
+    library built with eq. (7)'s scale (``provenance["noise_scale"]``,
+    :data:`bayespig.library.build.NOISE_SCALES`; a library saved without it predates the
+    measured scale and used eq. 7's), plus, with ``prior``, the library's thickness prior as a
+    penalty, ``((log h - mu) / sd)^2`` with ``(mu, sd) = library.thickness_prior`` (the spread of
+    its own films' ``log h``): the held-out film gets the prior every film of the library had
+    (:class:`bayespig.inference.film_thickness.FilmThickness`), not a free scalar that can run
+    to where no drawdown is. Without it, Revigo 12D (cobalt blue with 1 % bone black) went to
+    ``h = 29`` in the MCMC study (``bayespig colour-prediction``, 2026-12-04); with it to 3.38,
+    at the same ΔE00 (10.74 / 10.71 over black / white): the film hides its card at either
+    thickness and its miss is in the constants, not in ``h``.
+
+    Revigo series 01-15, point estimates of every leave-one-out library
+    (``benchmarks/loo_point_estimates.py``): the measured scale against eq. (7)'s moved the
+    median ΔE00 of all held-out films from 2.30 to 2.22 (radiative transfer) and from 2.36 to
+    2.32 (Kubelka-Munk); the prior left the class medians within 0.02 and moved three films by
+    more than 0.05 (that script's docstring).
     """
     measured_scale = library.provenance.get("noise_scale", "model") == "measured"
+    eps = float(library.provenance.get("eps", LIBRARY_EPS))
+    mean, sd = library.thickness_prior
 
     def misfit(log_h):
         h = np.array([np.exp(log_h)])
-        total = 0.0
+        total = ((log_h - mean) / sd) ** 2 if prior else 0.0
         for _, card, values in pairs:
             R = predict_reflectance(library, recipe, constants[None], h, instrument=instrument, substrate=card)[0]
-            total += float(np.sum(((values - R) / (values if measured_scale else R)) ** 2))
+            total += float(np.sum(((values - R) / (eps * (values if measured_scale else R))) ** 2))
         return total
     result = optimize.minimize_scalar(misfit, bounds=np.log(THICKNESS_RANGE), method="bounded",
                                       options={"xatol": 1e-4})

@@ -18,10 +18,11 @@ measured over its own black and white card on an 8°/d sphere.
    the tinting pigment was fitted with, not their own independent draws). ``X``'s film
    thickness is unknown; three variants:
 
-   * ``fitted`` (headline): the one free scalar, ``h``, fitted to ``X``'s two spectra by least
-     squares in relative deviation with the median constants, each value's deviation relative
-     to the scale of the library's noise model (the measured value by default; everything
-     else is predicted);
+   * ``fitted`` (headline): the one free scalar, ``h``, fitted to ``X``'s two spectra with the
+     median constants, each value's deviation relative to the scale of the library's noise
+     model (the measured value by default; everything else is predicted), at the mode of its
+     posterior under the library's thickness prior (the prior each of its films had;
+     :func:`bayespig.library.validation._fit_thickness`);
    * ``per card``: one ``h`` per card, each fitted to that card's spectrum alone by the same
      rule. A drawdown over a black and a white card is two spots of paint whose thickness
      need not be the same: 91 bands of 13 Revigo films are brighter over the black card than

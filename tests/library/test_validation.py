@@ -30,7 +30,7 @@ def test_the_thickness_minimises_the_misfit_of_the_library_s_own_noise_scale(noi
     library = dataclasses.replace(_library(), provenance={"noise_scale": noise_scale})
     black, white = np.full(WL.size, 0.05), np.full(WL.size, 0.8)
     pairs = [(name, card, 1.2 * _spectra(library, 1.5, card)) for name, card in (("black", black), ("white", white))]
-    h = _fit_thickness(library, RECIPE, library.constants[0], "8d-sce", pairs)
+    h = _fit_thickness(library, RECIPE, library.constants[0], "8d-sce", pairs, prior=False)
 
     def misfit(h_value, scale):
         total = 0.0
@@ -45,6 +45,35 @@ def test_the_thickness_minimises_the_misfit_of_the_library_s_own_noise_scale(noi
     assert grid[0] < min(best.values()) and max(best.values()) < grid[-1]  # inside the grid
     # the grid's spacing is 4.1e-3 in log h: half of it plus the search's tolerance
     assert abs(np.log(h / best[noise_scale])) < LOG_H_ATOL + 2.1e-3
+
+
+@pytest.mark.parametrize("eps", [0.02, 0.2])
+def test_the_thickness_is_the_mode_under_the_library_s_thickness_prior(eps):
+    """A film drawn at h = 6, far outside the library's films (prior log h ~ N(log 2, 0.2^2)):
+    without the prior its thickness comes back exactly; with it, the fit is the minimum of the
+    standardized misfit (eps from the provenance) plus the prior's penalty, found again here by a
+    grid, and lies between the prior's centre and the truth."""
+    library = dataclasses.replace(_library(), provenance={"noise_scale": "measured", "eps": eps})
+    mean, sd = library.thickness_prior
+    black, white = np.full(WL.size, 0.05), np.full(WL.size, 0.8)
+    pairs = [(name, card, _spectra(library, 6.0, card)) for name, card in (("black", black), ("white", white))]
+    free = _fit_thickness(library, RECIPE, library.constants[0], "8d-sce", pairs, prior=False)
+    h = _fit_thickness(library, RECIPE, library.constants[0], "8d-sce", pairs)
+    assert abs(np.log(free / 6.0)) < LOG_H_ATOL
+
+    def posterior(h_value):
+        total = ((np.log(h_value) - mean) / sd) ** 2
+        for _, card, values in pairs:
+            total += np.sum(((values - _spectra(library, h_value, card)) / (eps * values)) ** 2)
+        return total
+
+    grid = np.exp(np.linspace(np.log(1.0), np.log(8.0), 801))
+    best = grid[np.argmin([posterior(g) for g in grid])]
+    assert grid[0] < best < grid[-1]
+    # the grid's spacing is 2.6e-3 in log h: half of it plus the search's tolerance
+    assert abs(np.log(h / best)) < LOG_H_ATOL + 1.3e-3
+    assert np.exp(mean) < h < 6.0
+    assert abs(np.log(h / 6.0)) > 10 * LOG_H_ATOL  # the prior moved it
 
 
 #: Films and draws of the coverage test: 2 cards a film, the count inside Binomial(120, 0.9).
