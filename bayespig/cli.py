@@ -47,6 +47,9 @@ EXIT_BROKEN_PIPE = 141
 EXIT_NOT_INFERABLE = 1
 #: Exit status of a user's mistake (bad argument, unreadable file), as argparse uses.
 EXIT_USAGE = 2
+#: ArviZ 0.x announces its 1.0 refactor by a FutureWarning on import (``arviz<1`` is pinned):
+#: a notice to developers, not to a user of the command.
+ARVIZ_REFACTOR_NOTICE = r"(?s).*ArviZ is undergoing"
 
 
 def _table_build(args):
@@ -393,6 +396,8 @@ def main(argv=None):
     run created are removed.
     """
     created, verbose = [], False
+    # inherited by the local pools' forked workers, which import arviz too
+    warnings.filterwarnings("ignore", message=ARVIZ_REFACTOR_NOTICE, category=FutureWarning)
     try:
         args = build_parser().parse_args(argv)
         verbose = getattr(args, "verbose", False)

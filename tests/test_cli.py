@@ -499,3 +499,23 @@ def test_verbose_adds_the_traceback_of_an_error(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("Traceback (most recent call last):\n")
     assert err.endswith(f"ValueError: {missing}: file not found\nbayespig: error: {missing}: file not found\n")
+
+
+@pytest.mark.parametrize("importer", ["main", "worker"])
+def test_the_command_does_not_pass_on_arviz_s_refactor_notice(importer, tmp_path):
+    """arviz 0.x warns on its first import of the day (stamped in the user cache, here a fresh
+    one) that 1.0 is coming; a user of the command sees none of it. The script imports arviz
+    after ``main`` ran, in a fresh process (arviz not yet imported) or in a worker forked from
+    it, as the local pools' workers are."""
+    load = ("import arviz" if importer == "main" else
+            "worker = multiprocessing.get_context('fork').Process(target=__import__, args=('arviz',)); "
+            "worker.start(); worker.join()")
+    script = ("import multiprocessing, sys; from bayespig.cli import main; status = main(sys.argv[1:]); "
+              f"assert 'arviz' not in sys.modules; {load}; sys.exit(status)")
+    env = {**os.environ, "PYTHONPATH": str(Path(bayespig.__file__).parents[1]), "BAYESPIG_CACHE": str(tmp_path),
+           "XDG_CACHE_HOME": str(tmp_path / "user-cache")}
+    missing = tmp_path / "nothing.csv"
+    done = subprocess.run([sys.executable, "-c", script, "check", str(missing)], capture_output=True, text=True,
+                          env=env, timeout=120, check=False)
+    assert done.returncode == 2
+    assert done.stderr == f"bayespig: error: {missing}: file not found\n"

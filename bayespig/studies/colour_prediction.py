@@ -249,9 +249,11 @@ def colour_prediction_report(study, *, command="bayespig colour-prediction"):
     card_ratios = ", ".join(f"{cls}s {m_card[0][cls] / m_card[1][cls]:.2f}" for cls in ("white tint", "black shade")
                             if m_card[1][cls] > 0)
     lines += ["", "Goals (fitted thickness): " + "; ".join(goals) + ".", "",
-              "Thickness: *fitted*, one relative thickness per film fitted to both of its spectra; *per card*, "
-              "one per card fitted to that card's spectrum alone (a drawdown's two halves need not be of one "
-              "thickness); *unknown*, drawn from the library's films. Everything else is predicted. With one "
+              "Thickness: *fitted*, one relative thickness per film fitted to both of its spectra, at its "
+              "posterior mode under the library's thickness prior (the prior each of the library's films had); "
+              "*per card*, one per card fitted to that card's spectrum alone under the same prior (a drawdown's "
+              "two halves need not be of one thickness); *unknown*, drawn from the library's films. Everything "
+              "else is predicted. With one "
               f"thickness per card, bayespig / Kubelka-Munk: {card_ratios}; overall bayespig "
               f"{m_card[0]['overall']:.2f}. This bounds what a difference of thickness between the cards can "
               f"explain; the two thicknesses differ by more than a factor {CARD_THICKNESS_FACTOR:g} for "
