@@ -27,10 +27,10 @@ measured over its own black and white card on an 8°/d sphere.
      rule. A drawdown over a black and a white card is two spots of paint whose thickness
      need not be the same: 91 bands of 13 Revigo films are brighter over the black card than
      over the white one (``reports/revigo.md``), which no layer of one thickness gives. The
-     study (series 01-15) moved the median ΔE00 of all held-out films from 2.28 to 1.83
-     (radiative transfer) and from 2.32 to 1.86 (Kubelka-Munk) against one ``h`` for both
-     cards (point estimates of the same libraries, ``benchmarks/loo_point_estimates.py``: 2.22
-     to 1.93 and 2.32 to 1.83); the libraries themselves still give each film one thickness.
+     study (series 01-15, thickness prior on) moved the median ΔE00 of all held-out films from
+     2.38 to 1.84 (radiative transfer) and from 2.32 to 1.86 (Kubelka-Munk) against one ``h``
+     for both cards (point estimates of the same libraries, ``benchmarks/loo_point_estimates.py``:
+     2.33 to 1.93 and 2.32 to 1.83); the libraries themselves still give each film one thickness.
      It is a bound on what a difference of thickness between the cards can explain, not a
      measurement of it: the two differ by more than a factor 2 for most of the 54 films
      (``reports/colour-prediction.md`` counts them), far more than a drawdown's

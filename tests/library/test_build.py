@@ -250,9 +250,14 @@ def test_cross_validation_learns_a_model_error(simulated):
     sets, _, _ = simulated
     films = {f: sets[f] for f in ("W", "WB1", "WB2", "R", "RW1", "RW2", "RB")}
     library = build_library(films, seed=1, progress=False, settings=QUICK, base_pigments=["White", "Black"])
+    said = []
     validated, predictions = cross_validate(library, films, targets=["RW2", "RB"], seed=2, settings=QUICK,
-                                            executor=None)
+                                            executor=None, progress=said.append)
     assert [p.film_id for p in predictions] == ["RW2", "RB"]
+    # the long first step is announced before it starts, then each held-out film as it ends
+    assert said[0] == "building the base libraries (White, Black from 3 films, radiative-transfer) ..."
+    assert said[1].startswith("base libraries (White, Black from ") and " built: " in said[1]
+    assert [m.split(":")[0] for m in said[2:]] == ["[1/2] radiative-transfer RW2", "[2/2] radiative-transfer RB"]
     residuals = []
     for p in predictions:
         assert len(p.cards) == 2 and np.isnan(p.delta_E).all()  # three bands: no colour
