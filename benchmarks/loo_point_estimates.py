@@ -5,7 +5,7 @@ Run from the repository root::
     python benchmarks/loo_point_estimates.py [--series 01,...] [--h-scale library|predicted] [--leak L]
                                              [--no-h-prior] [--per-film]
 
-``bayespig colour-prediction`` builds 108 leave-one-out libraries by MCMC (30-60 min on 2 cores).
+``bayespig colour-prediction`` builds 108 leave-one-out libraries by MCMC (50-80 min on 2 cores).
 To compare choices of the protocol this script runs the very same code
 (:func:`bayespig.library.validation.leave_one_out`, both film models, base pigments zinc white
 and bone black) with each stage's posterior replaced by its starting point, the joint

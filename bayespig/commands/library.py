@@ -197,7 +197,7 @@ def add_library_parsers(subparsers):
     study = subparsers.add_parser("colour-prediction", help="leave-one-film-out colour prediction vs Kubelka-Munk",
                                   description="Predict every mixture film of the Revigo series 01-15 by a library "
                                   "built without it, with bayespig's and with Kubelka-Munk's film model, and write "
-                                  "reports/colour-prediction.md (about 50 minutes on 2 cores).")
+                                  "reports/colour-prediction.md (50-80 minutes on 2 cores).")
     study.add_argument("path", nargs="?", default=None, help="Revigo data folder (default as 'bayespig revigo')")
     add_output_argument(study, "--report", kind="file", default="reports/colour-prediction.md",
                         help="Markdown report to write")
