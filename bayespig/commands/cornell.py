@@ -22,7 +22,7 @@ def add_cornell_parser(subparsers):
         description="Fit the two Cornell gonio paints (garnet red, Krylon blue) as opaque films under a "
         "rough surface (roughness and a noise floor inferred), check that geometry subsets agree, compare "
         "with the smooth surface, and write the report (reports/cornell.md and reports/cornell/*.png). "
-        "Took 31 min on 2 cores with --jobs 2 (the paints at once; reports/benchmarks.md).",
+        "Takes 30-80 min on 2 cores with --jobs 2 (the paints at once; reports/benchmarks.md, reports/cornell.md).",
     )
     parser.add_argument("path", nargs="?", default=None,
                         help="folder of the Cornell data (default $BAYESPIG_CORNELL, else ../shared/data/cornell "
