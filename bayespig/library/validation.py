@@ -318,11 +318,11 @@ def leave_one_out(measurements, *, targets=None, models=("radiative-transfer",),
     with executor_or_local_pool(executor) as pool:
         bases = {}
         if base_films:
-            say(f"building the base libraries ({', '.join(base) or 'none'} from {len(base_films)} films, "
-                f"{' and '.join(models)}) ...")
+            pigments = ", ".join(base) or "none"
+            say(f"building the base libraries ({pigments} from {len(base_films)} films, {' and '.join(models)}) ...")
             futures = {m: pool.submit(_build, ({f: sets[f] for f in base_films}, base_films, m, seed, None, settings, noise_scale)) for m in models}
             bases = {m: future.result() for m, future in futures.items()}
-            say(f"base libraries ({', '.join(base) or 'none'} from {', '.join(base_films)}) built: "
+            say(f"base libraries ({pigments} from {', '.join(base_films)}) built: "
                 f"{time.perf_counter() - started:.0f} s")
         tasks = []
         for m in models:
