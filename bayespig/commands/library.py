@@ -237,7 +237,7 @@ def run_library_build(args):
         if len(mixtures) < 2:
             raise ValueError(f"--cross-validate needs at least two mixture films (two or more pigments); "
                              f"{path} has {len(mixtures)}{': ' + mixtures[0] if mixtures else ''}")
-    library = build_library(sets, model=args.model, seed=args.seed, progress=_say(args) or False,
+    library = build_library(sets, model=args.model, seed=args.seed, progress=not args.no_progress,
                             substrate_sd=substrate_sd, concentration_sd=concentration_sd,
                             noise_scale=args.noise_scale)
     if args.cross_validate:

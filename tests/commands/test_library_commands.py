@@ -1,10 +1,14 @@
 """``bayespig predict`` and ``bayespig match`` on a saved library; the recipe and spectrum arguments."""
 
+import functools
+
 import numpy as np
 import pytest
 
 from bayespig.cli import main
 from bayespig.commands.library import recipe_argument, spectrum_argument
+from bayespig.inference.settings import InferenceSettings
+from bayespig.library import load_library
 from bayespig.library.library import PigmentLibrary
 from bayespig.studies.revigo import default_revigo_path
 
@@ -118,3 +122,37 @@ def test_library_build_refuses_to_cross_validate_one_mixture_before_building(tmp
         f"bayespig: error: --cross-validate needs at least two mixture films (two or more pigments); {REVIGO} "
         "has 1: 07C")
     assert not out.exists()
+
+
+#: A tiny sampler for the command's path only: convergence and coverage are the API tests'
+#: (tests/library/test_build.py, test_validation.py), not this one's.
+TINY = InferenceSettings(target_ess=20.0, draws_per_chain=16, min_steps=100, max_steps=300, check_interval=100)
+
+
+@needs_revigo
+def test_library_build_cross_validates_with_progress_and_predict_adds_the_model_error(tmp_path, capsys,
+                                                                                      monkeypatch):
+    """``bayespig library build --cross-validate`` end to end on real films (07A zinc white, 07C and
+    07D its greys with bone black), progress shown (the default; it once stopped the command with a
+    TypeError before any build): the stages and held-out films reported on stderr, the library
+    written with the model error of both held-out films, and ``bayespig predict`` using it."""
+    import bayespig.library as library_api
+    import bayespig.library.validation as validation
+
+    monkeypatch.setattr(library_api, "build_library", functools.partial(library_api.build_library, settings=TINY))
+    monkeypatch.setattr(validation, "cross_validate", functools.partial(validation.cross_validate, settings=TINY))
+    out = tmp_path / "library.nc"
+    assert main(["library", "build", str(REVIGO), "--films", "07A,07C,07D", "--cross-validate",
+                 "--out", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert "library stage 1/1: BoneBlack, ZincWhite from 3 films: " in captured.err
+    assert [line.split(":")[0] for line in captured.err.splitlines() if line.startswith("[")] == [
+        "[1/2] radiative-transfer 07C", "[2/2] radiative-transfer 07D"]
+    assert "model error from 2 held-out films, calibration factor " in captured.out
+    assert captured.out.strip().splitlines()[-1].endswith(", cross-validated model error")
+    library = load_library(out)
+    assert library.model_error.shape == (library.wavelength_nm.size,) * 2
+    assert library.provenance["model_error"]["films"] == ["07C", "07D"]
+    assert main(["predict", str(out), "--recipe", "ZincWhite:95,BoneBlack:5", "-q"]) == 0
+    text = capsys.readouterr().out
+    assert "credible region: ΔE00 <=" in text and "no cross-validated model error" not in text
