@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import tempfile
 from pathlib import Path
 
@@ -203,6 +204,14 @@ def add_verbosity_arguments(parser):
     group.add_argument("-v", "--verbose", action="store_true",
                        help="on an error, also print its traceback (for a bug report)")
 
+
+def progress_printer(args):
+    """The progress callback of a study run from the command line: one line per message on stderr.
+
+    ``None`` under ``--quiet`` (:func:`add_verbosity_arguments`). For the APIs that take a
+    callable ``progress``; those that take a flag get ``not args.no_progress``.
+    """
+    return None if args.no_progress else (lambda message: print(message, file=sys.stderr, flush=True))
 
 # ----------------------------------------------------------------------- methods, instruments
 def method_argument(text):

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import sys
-
-from ._arguments import add_output_argument, add_verbosity_arguments, reference_data_folder
+from ._arguments import add_output_argument, add_verbosity_arguments, progress_printer, reference_data_folder
 
 __all__ = ["CORNELL_SOURCE", "add_cornell_parser", "cornell_folder", "run_cornell"]
 
@@ -91,7 +89,7 @@ def run_cornell(args):
     if args.full_bands is not None:
         settings = dataclasses.replace(settings, full_bands=tuple(args.full_bands))
     folder = cornell_folder(args.path)
-    progress = None if args.no_progress else (lambda message: print(message, file=sys.stderr, flush=True))
+    progress = progress_printer(args)
     study = cornell_study(folder, settings=settings, progress=progress, jobs=args.jobs)
     path = write_cornell_report(study, args.report)
     print(f"wrote {path}: " + "; ".join(

@@ -7,14 +7,14 @@ and the recipe that matches a target (:func:`bayespig.match_paint`).
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from .._atomic import atomic_path
 from ..library.build import DEFAULT_NOISE_SCALE, NOISE_SCALES
-from ._arguments import add_input_argument, add_output_argument, add_substrate_argument, add_verbosity_arguments
+from ._arguments import (add_input_argument, add_output_argument, add_substrate_argument, add_verbosity_arguments,
+                         progress_printer)
 
 __all__ = ["add_library_parsers", "recipe_argument", "spectrum_argument"]
 
@@ -210,10 +210,6 @@ def add_library_parsers(subparsers):
     study.set_defaults(func=run_colour_prediction)
 
 
-def _say(args):
-    return None if args.no_progress else (lambda message: print(message, file=sys.stderr, flush=True))
-
-
 def run_library_build(args):
     from ..data.spectral_table import read_revigo
     from ..inference.arguments import check_substrate_sd
@@ -241,7 +237,7 @@ def run_library_build(args):
                             substrate_sd=substrate_sd, concentration_sd=concentration_sd,
                             noise_scale=args.noise_scale)
     if args.cross_validate:
-        library, predictions = cross_validate(library, sets, seed=args.seed, progress=_say(args))
+        library, predictions = cross_validate(library, sets, seed=args.seed, progress=progress_printer(args))
         calibration = library.provenance["model_error"]["calibration"]
         print(f"model error from {len(predictions)} held-out films"
               + (f", calibration factor {calibration['factor']:.2f} at {calibration['level']:.0%}"
@@ -348,7 +344,7 @@ def run_colour_prediction(args):
         command += f" --series {','.join(series)}"
     if args.noise_scale != DEFAULT_NOISE_SCALE:
         command += f" --noise-scale {args.noise_scale}"
-    study = colour_prediction_study(path, films=films, seed=args.seed, progress=_say(args),
+    study = colour_prediction_study(path, films=films, seed=args.seed, progress=progress_printer(args),
                                     noise_scale=args.noise_scale)
     text = colour_prediction_report(study, command=command)
     with atomic_path(args.report) as tmp:

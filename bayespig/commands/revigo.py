@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import sys
-
 import numpy as np
 
-from ._arguments import add_output_argument, add_verbosity_arguments, reference_data_folder
+from ._arguments import add_output_argument, add_verbosity_arguments, progress_printer, reference_data_folder
 
 __all__ = ["REVIGO_SOURCE", "add_revigo_parser", "revigo_folder", "run_revigo"]
 
@@ -91,7 +89,7 @@ def run_revigo(args):
     if args.draws < 10:
         raise ValueError(f"--draws must be >= 10, got {args.draws}")
     path = revigo_folder(args.path)
-    progress = None if args.no_progress else (lambda message: print(message, file=sys.stderr, flush=True))
+    progress = progress_printer(args)
     study = revigo_study(path, specular=args.specular, progress=progress, posterior=args.posterior,
                          posterior_eps=eps, n_draws=args.draws, seed=args.seed,
                          g_sensitivity=G_SENSITIVITY if args.g_sensitivity is None else tuple(args.g_sensitivity),

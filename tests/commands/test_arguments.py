@@ -1,10 +1,12 @@
 """Shared command-line values: method spellings (one function for the API and the CLI) and the
 output check made before any work."""
 
+import argparse
+
 import numpy as np
 import pytest
 
-from bayespig.commands._arguments import check_output_path, parse_methods
+from bayespig.commands._arguments import add_verbosity_arguments, check_output_path, parse_methods, progress_printer
 from bayespig.likelihood import method_name
 
 VALID = "1, 2, 3, 4, method1, method2, method3, method4"
@@ -60,3 +62,14 @@ def test_film_of_a_posterior_is_refused(tmp_path):
     with pytest.raises(ValueError, match=r"^--film selects a film of a measurement table; '.*run.nc' is a posterior, "
                                          r"which holds one film already: leave out --film 04B$"):
         read_film(tmp_path / "run.nc", "04B")
+
+
+def test_progress_printer_prints_each_message_on_stderr_and_nothing_when_quiet(capsys):
+    parser = argparse.ArgumentParser()
+    add_verbosity_arguments(parser)
+    say = progress_printer(parser.parse_args([]))
+    say("stage 1 done")
+    say("stage 2 done")
+    captured = capsys.readouterr()
+    assert captured.err == "stage 1 done\nstage 2 done\n" and captured.out == ""
+    assert progress_printer(parser.parse_args(["-q"])) is None
