@@ -213,6 +213,7 @@ def progress_printer(args):
     """
     return None if args.no_progress else (lambda message: print(message, file=sys.stderr, flush=True))
 
+
 # ----------------------------------------------------------------------- methods, instruments
 def method_argument(text):
     """argparse ``type`` of ``--method``: a method (any spelling), ``auto`` or ``general``."""
