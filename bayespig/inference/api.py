@@ -47,7 +47,7 @@ from .roughness import (
     roughness_argument,
 )
 from .settings import ConvergenceWarning
-from .shared import pilot_draws, sample_joint
+from .shared import FilmLayout, pilot_draws, sample_joint
 
 #: The pilot of a joint run only starts it (the adaptation run and the burn-in follow): it runs
 #: to at most this ESS, these autocorrelation times and this minimum of steps (Revigo 07A,
@@ -195,14 +195,16 @@ def _pilot_blocks(pilot, problem, floored):
     return draws
 
 
-def _sample_shared(problem, model, priors, eps, settings, seed, specs, executor, progress, noise_floor=None):
+def _sample_shared(problem, model, priors, eps, settings, seed, specs, executor, progress, noise_floor=None,
+                   incidence_offset=False):
     """Joint run over all wavelengths with the shared parameters ``specs`` (:mod:`bayespig.inference.shared`).
 
     The pilot is a short per-wavelength run of the problem as given (the specs' nominal values,
     e.g. every card at its stated albedo, the model's roughness; :data:`PILOT_TARGET_ESS`).
     With ``noise_floor="infer"`` the blocks carry one floor per wavelength
-    (:class:`~bayespig.inference.roughness.NoiseFloorFilmLayout`). Returns what
-    :func:`~bayespig.inference.shared.sample_joint` returns.
+    (:class:`~bayespig.inference.roughness.NoiseFloorFilmLayout`), and with ``incidence_offset``
+    one incidence offset per wavelength after it (its start: :func:`_with_offset_starts`).
+    Returns what :func:`~bayespig.inference.shared.sample_joint` returns.
     """
     pilot_seed, joint_seed, start_seed = np.random.SeedSequence(int(seed)).spawn(3)
     pilot_settings = dataclasses.replace(
@@ -218,11 +220,14 @@ def _sample_shared(problem, model, priors, eps, settings, seed, specs, executor,
         pilot = infer_problem(problem, seed=int(pilot_seed.generate_state(1)[0]), g="isotropic", eps=eps,
                               executor=executor, progress=progress, priors=priors, settings=pilot_settings,
                               tables=model.tables, noise_floor=noise_floor, roughness=model.roughness)
-    layout = NoiseFloorFilmLayout(model, priors, eps) if floored else model
+    layout = NoiseFloorFilmLayout(model, priors, eps, incidence_offset) if floored else model
     draws = _pilot_blocks(pilot, problem, floored)
     if model.flakes:
         flake_seed = np.random.SeedSequence(int(seed)).spawn(4)[3]
         draws = _with_flake_starts(draws, model, specs, priors, eps, floored, flake_seed)
+    if incidence_offset:
+        offset_seed = np.random.SeedSequence(int(seed)).spawn(5)[4]
+        draws = _with_offset_starts(draws, layout, specs, priors, offset_seed)
     return sample_joint(layout, specs, draws, priors, eps, settings, joint_seed, start_seed)
 
 
@@ -261,8 +266,36 @@ def _with_flake_starts(draws, model, specs, priors, eps, floored, seed):
     return np.concatenate([draws[..., :1 + G], column[..., None], draws[..., 1 + G:]], axis=-1)
 
 
+def _with_offset_starts(draws, layout, specs, priors, seed):
+    """The block draws with a start column ``log b`` (the incidence offset) appended.
+
+    The pilot has no offset; per band, ``b`` starts at its weighted least-squares value given
+    the median blocks and the specs' nominal values (``x_0 - x_obs ~ b s``, ``s = 1 / cos
+    theta_i``: :func:`~bayespig.inference.roughness.incidence_offset_scale`, weights ``1 / ((eps
+    x_0)^2 + sigma0^2)``), clipped into the prior's box, with a spread :data:`FLAKE_START_SD` in
+    ``log b`` over the draws (as the flakes' start, :func:`_with_flake_starts`).
+    """
+    n_points, n_wl, _ = draws.shape
+    median = np.median(draws, axis=0)
+    inputs = {}
+    for spec in specs:
+        inputs.update(spec.model_inputs(np.asarray(spec.nominal, dtype=float)[None, :]))
+    without = FilmLayout.predict(layout, median[None, :, :layout.film_size], inputs)[0]
+    floor = np.exp(median[:, layout.film_size])[:, None]
+    weight = 1.0 / ((np.asarray(layout.eps) * without) ** 2 + floor * floor)
+    scale = layout.offset_scale
+    b = (weight * scale * (without - layout.observed)).sum(axis=1) / np.maximum((weight * scale * scale).sum(axis=1),
+                                                                               1e-300)
+    low, high = (np.log(float(v)) for v in priors.noise_floor_range)
+    start = np.clip(np.log(np.maximum(b, 1e-300)), low + 3 * FLAKE_START_SD, high - 3 * FLAKE_START_SD)
+    rng = np.random.default_rng(seed)
+    column = np.clip(start + FLAKE_START_SD * rng.standard_normal((n_points, n_wl)), low, high)
+    return np.concatenate([draws, column[..., None]], axis=-1)
+
+
 def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, progress=True,
-                  priors=None, settings=None, tables=None, shared=None, noise_floor=None, roughness=0.0):
+                  priors=None, settings=None, tables=None, shared=None, noise_floor=None, roughness=0.0,
+                  incidence_offset=False):
     """Posterior samples of a :class:`~bayespig.likelihood.Problem` at every wavelength.
 
     Parameters as :func:`infer`, except ``eps``: a positive number (known, for films without
@@ -273,7 +306,8 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     wavelength's parameters; ``noise_floor`` as in :func:`infer` (with ``shared``: None or
     ``"infer"``); ``roughness``: the films' surface roughness, a number >= 0 (0: smooth, the
     smooth tables; > 0: the rough tables, opaque films only), the nominal value of a
-    :class:`~bayespig.inference.roughness.RoughnessSpec` in ``shared``.
+    :class:`~bayespig.inference.roughness.RoughnessSpec` in ``shared``; ``incidence_offset`` as
+    in :func:`infer` (needs ``shared`` and ``noise_floor="infer"``).
 
     Returns
     -------
@@ -300,6 +334,10 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
         raise ValueError(f"noise_floor is not available with {' and '.join(spec.title for spec in shared)} "
                          "(the joint run over all wavelengths infers one floor per band, noise_floor='infer', "
                          "or has none)")
+    incidence_offset = check_flag("incidence_offset", incidence_offset)
+    if incidence_offset and not (shared and noise_floor == "infer"):
+        raise ValueError("incidence_offset=True needs the joint run over all wavelengths with an inferred noise "
+                         "floor (roughness='free' and noise_floor='infer')")
     check_observed(problem, noise_floor)
     started = time.perf_counter()
     tables = {} if tables is None else tables
@@ -315,7 +353,7 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
         if g != "isotropic" or eps is None:
             raise ValueError(f"{' and '.join(spec.title for spec in shared)} need g='isotropic' and a known eps")
         results, shared_draws, settings, joint = _sample_shared(
-            problem, model, priors, eps, settings, seed, shared, executor, progress, noise_floor)
+            problem, model, priors, eps, settings, seed, shared, executor, progress, noise_floor, incidence_offset)
     else:
         seeds = np.random.SeedSequence(int(seed)).spawn(n_wl)
         # the stacks of wavelengths sampled together depend on the settings only (never on the
@@ -355,7 +393,7 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
 def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, executor=None,
           progress=True, priors=None, settings=None, substrate_sd=None, noise_floor=None,
           exclude_mirror_deg=None, max_angle_deg=None, wavelengths=None, wavelength_range=None,
-          roughness=None, binder_index=None, binder_index_prior=None, flakes=False):
+          roughness=None, binder_index=None, binder_index_prior=None, flakes=False, incidence_offset=False):
     """Posterior of ``a`` and ``tau`` (and ``g``, ``eps``) per wavelength from a measurement set.
 
     Parameters
@@ -448,6 +486,16 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         edge, a at 1 outside 440-520 nm): say ``flakes=True`` only for a paint with effect
         pigments. The joint run is slower (the garnet red's 1433 geometries x 31 bands: 8000
         steps, capped, 16 min, against 1112 steps and 2.5 min without flakes).
+    incidence_offset : bool
+        The instrument's readings of a BRDF carry an offset ``-b / cos theta_i`` per band (a
+        gonioreflectometer's background subtracted in excess, in radiance units, divided by the
+        irradiance ``E cos theta_i``; readings clipped at 0): the predicted reading is ``max(f -
+        b / cos theta_i, 0)`` (:class:`~bayespig.inference.roughness.NoiseFloorFilmLayout`), ``b``
+        log-uniform on ``priors.noise_floor_range``, inferred jointly. The posterior then holds
+        ``incidence_offset`` (chain, draw, wavelength), and the predictions (``y``) are the
+        predicted readings. Needs ``roughness="free"`` and ``noise_floor="infer"``. The Cornell
+        paints' exact zeros lie almost all at 70-80 deg incidence (the Krylon blue: 1172 of 1218
+        at 80 deg), the signature of such an offset.
 
     Returns
     -------
@@ -495,6 +543,11 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     if binder_index_prior is not None and binder_index != "free":
         raise ValueError("binder_index_prior is used with binder_index='free' only")
     flakes = check_flag("flakes", flakes)
+    incidence_offset = check_flag("incidence_offset", incidence_offset)
+    if incidence_offset and (roughness != "free" or noise_floor != "infer"):
+        raise ValueError("incidence_offset=True needs roughness='free' and noise_floor='infer' (the offset is "
+                         f"inferred in the joint run with the floor), got roughness={roughness!r}, "
+                         f"noise_floor={noise_floor!r}")
     if flakes and roughness != "free":
         raise ValueError("flakes=True needs roughness='free' (the flakes' roughness is inferred in the joint run "
                          f"with the surface's), got roughness={roughness!r}")
@@ -544,7 +597,7 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         nominal = roughness
     return infer_problem(problem, seed=seed, g=g, eps=eps_value, executor=executor,
                          progress=progress, priors=priors, settings=settings, shared=shared,
-                         noise_floor=noise_floor, roughness=nominal)
+                         noise_floor=noise_floor, roughness=nominal, incidence_offset=incidence_offset)
 
 
 def _resolve_roughness(roughness, problem, g, eps, substrate_sd):

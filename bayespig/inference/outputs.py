@@ -18,6 +18,9 @@ VARIABLE_ATTRS = {
     "eps": {"long_name": "relative measurement error eps (eq. 7)", "units": "1"},
     # units of noise_floor: those of the measured values, set per result (noise_floor_units)
     "noise_floor": {"long_name": "additive noise floor sigma0 (sd of a reading of 0)"},
+    # units: those of the measured values, as the floor's
+    "incidence_offset": {"long_name": "instrument offset b of a BRDF reading at normal incidence "
+                                      "(the reading is max(f - b / cos theta_i, 0))"},
     "flake_reflectance": {"long_name": "reflectance c of the effect-pigment flakes (their lobe: "
                                        "bayespig.physics.forward.flake_brdf)", "units": "1"},
 }
@@ -130,7 +133,8 @@ def _prior_bounds(priors, posterior, shared=()):
     ranges = {"a": (priors.a_range, "linear"), "tau": (priors.tau_range, "log"),
               "tau_group": (priors.tau_range, "log"), "g": (priors.g_range, "linear"),
               "eps": (priors.eps_range, "log"), "noise_floor": (priors.noise_floor_range, "log"),
-              "flake_reflectance": (priors.flake_reflectance_range, "log")}
+              "flake_reflectance": (priors.flake_reflectance_range, "log"),
+              "incidence_offset": (priors.noise_floor_range, "log")}
     bounds = {name: {"lower": float(low), "upper": float(high), "scale": scale}
               for name, ((low, high), scale) in ranges.items() if name in posterior}
     for spec in shared:
@@ -200,6 +204,8 @@ def _inference_data(problem, model, results, settings, log_post0, fit, *, seed, 
         posterior["noise_floor"] = (cdw, stack("noise_floor"))
     if "flake_reflectance" in results[0]:
         posterior["flake_reflectance"] = (cdw, stack("flake_reflectance"))
+    if "incidence_offset" in results[0]:
+        posterior["incidence_offset"] = (cdw, stack("incidence_offset"))
     post_coords = dict(coords)
     if len(groups) > 1:
         post_coords["group"] = groups
@@ -215,6 +221,8 @@ def _inference_data(problem, model, results, settings, log_post0, fit, *, seed, 
     parameters = list(log_post0.parameter_names)
     if "flake_reflectance" in results[0]:  # the joint run's block: [a, log tau.., log c, (log sigma0)]
         parameters.insert(1 + len(groups), "log_flake_reflectance")
+    if "incidence_offset" in results[0]:  # ... then the incidence offset, last
+        parameters.append("log_incidence_offset")
     sample_stats = {
         "lp": (cdw, stack("lp")),
         "acceptance_rate": (("chain", "wavelength"), stack("acceptance_rate", axis=1)),
@@ -288,6 +296,7 @@ def _inference_data(problem, model, results, settings, log_post0, fit, *, seed, 
             dataset.coords["wavelength"].attrs.update(WAVELENGTH_ATTRS)
     described = dict(VARIABLE_ATTRS)
     described["noise_floor"] = {**VARIABLE_ATTRS["noise_floor"], "units": noise_floor_units(problem)}
+    described["incidence_offset"] = {**VARIABLE_ATTRS["incidence_offset"], "units": noise_floor_units(problem)}
     described.update({spec.variable: {"long_name": spec.long_name, "units": spec.units} for spec, _ in shared})
     for name, variable_attrs in described.items():
         if name in datasets["posterior"]:

@@ -49,9 +49,19 @@ from .shared import FilmLayout, SharedParameter
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 
-__all__ = ["BINDER_INDEX_PRIOR", "FLAKE_ROUGHNESS_RANGE", "ROUGHNESS_START_SD", "BinderIndexSpec", "FlakeRoughnessSpec",
-           "NoiseFloorFilmLayout",
-           "RoughnessSpec", "binder_index_argument", "binder_index_prior_argument", "roughness_argument"]
+__all__ = [
+    "BINDER_INDEX_PRIOR",
+    "FLAKE_ROUGHNESS_RANGE",
+    "ROUGHNESS_START_SD",
+    "BinderIndexSpec",
+    "FlakeRoughnessSpec",
+    "NoiseFloorFilmLayout",
+    "RoughnessSpec",
+    "binder_index_argument",
+    "binder_index_prior_argument",
+    "incidence_offset_scale",
+    "roughness_argument",
+]
 
 #: Draws per chain kept by the pilot of a roughness or noise-floor joint run: it only gives the
 #: blocks' medians and start points, and its stored per-draw predictions would be most of the memory.
@@ -327,60 +337,99 @@ class FlakeRoughnessSpec(SharedParameter):
 
 
 class NoiseFloorFilmLayout(FilmLayout):
-    """The film layout with an inferred additive noise floor per wavelength.
+    """The film layout with an inferred additive noise floor per wavelength (and optionally the
+    instrument's incidence offset).
 
-    Blocks ``[a, log tau_1..G, (log c), log sigma0]``; flat order ``[a (n_wl), log tau (n_wl * G),
-    (log c (n_wl)), log sigma0 (n_wl)]`` (``log c``: the flakes' reflectance of a model with
-    flakes, :class:`~bayespig.inference.shared.FilmLayout`); likelihood ``N(x_obs | x, (eps x)^2 +
-    sigma0^2)``.
+    Blocks ``[a, log tau_1..G, (log c), log sigma0, (log b)]``; flat order ``[a (n_wl), log tau
+    (n_wl * G), (log c (n_wl)), log sigma0 (n_wl), (log b (n_wl))]`` (``log c``: the flakes'
+    reflectance of a model with flakes, :class:`~bayespig.inference.shared.FilmLayout`; ``log b``:
+    the incidence offset, below); likelihood ``N(x_obs | m, (eps m)^2 + sigma0^2)`` with ``m`` the
+    predicted reading.
+
+    Incidence offset
+    ----------------
+    A gonioreflectometer measures a radiance and divides it by the irradiance ``E cos theta_i``
+    on the sample. A constant error of its background (dark-signal or stray-light) subtraction,
+    in radiance units, is then an additive error ``b / cos theta_i`` of the BRDF: 5.8 times
+    larger at 80 deg incidence than at normal incidence, largest in relative terms where the
+    paint is dark, and a background subtracted in excess shows as readings clipped to exactly 0
+    at grazing incidence. With ``incidence_offset=True`` the predicted reading of a BRDF value is
+    ``m = max(f - b / cos theta_i, 0)`` (``f`` the film's BRDF, ``b >= 0`` per band, log-uniform on
+    ``priors.noise_floor_range``, in the units of the values; values of other channels are not
+    offset). On the Cornell paints 1172 of the Krylon blue's 1218 exact zeros are at theta_i =
+    80 deg, and the offset takes the least-squares residual at 420 nm from 33 % to 5 %
+    (``python benchmarks/cornell_incidence_offset.py``).
 
     Parameters
     ----------
     model : ForwardModel
     priors : Priors
-        ``noise_floor_range`` is the floor's log-uniform support.
+        ``noise_floor_range`` is the floor's (and the offset's) log-uniform support.
     eps : float
         Known relative error for films without their own [-].
+    incidence_offset : bool
+        Infer the incidence offset ``b`` per band.
     """
 
-    def __init__(self, model, priors, eps):
+    def __init__(self, model, priors, eps, incidence_offset=False):
         super().__init__(model, priors, eps)
-        self.names = self.names + ("log_noise_floor",)
+        self.incidence_offset = bool(incidence_offset)
+        extra = ("log_noise_floor",) + (("log_incidence_offset",) if self.incidence_offset else ())
+        self.names = self.names + extra
         n_wl = self.n_wavelengths
         low, high = (np.log(float(v)) for v in priors.noise_floor_range)
-        self.lower = np.concatenate([self.lower, np.full((n_wl, 1), low)], axis=1)
-        self.upper = np.concatenate([self.upper, np.full((n_wl, 1), high)], axis=1)
+        self.lower = np.concatenate([self.lower, np.full((n_wl, len(extra)), low)], axis=1)
+        self.upper = np.concatenate([self.upper, np.full((n_wl, len(extra)), high)], axis=1)
+        self.offset_scale = incidence_offset_scale(model.problem)
 
     @property
     def flat_index(self):
-        """``[a (n_wl), log tau (n_wl * G), (log c (n_wl)), log sigma0 (n_wl)]``."""
+        """``[a (n_wl), log tau (n_wl * G), (log c (n_wl)), log sigma0 (n_wl), (log b (n_wl))]``."""
         film = super().flat_index
-        return np.concatenate([film, (self.n_wavelengths * self.film_size + np.arange(self.n_wavelengths))[:, None]],
-                              axis=1)
+        n_wl = self.n_wavelengths
+        extra = [(n_wl * (self.film_size + j) + np.arange(n_wl))[:, None] for j in range(1 + self.incidence_offset)]
+        return np.concatenate([film] + extra, axis=1)
 
     @property
     def parameter_names(self):
-        """Those of the film layout, then ``r_log_noise_floor[w]``."""
-        return super().parameter_names + tuple(f"r_log_noise_floor[{w:g}]" for w in self.wavelength_nm)
+        """Those of the film layout, then ``r_log_noise_floor[w]`` (then ``r_log_incidence_offset[w]``)."""
+        wl = [f"{w:g}" for w in self.wavelength_nm]
+        names = super().parameter_names + tuple(f"r_log_noise_floor[{w}]" for w in wl)
+        if self.incidence_offset:
+            names += tuple(f"r_log_incidence_offset[{w}]" for w in wl)
+        return names
 
     def predict(self, theta, inputs):
-        """The film values from the blocks without their floor, (W, n_wl, n_values)."""
-        return super().predict(theta[..., :-1], inputs)
+        """The predicted readings ``m`` from the blocks, (W, n_wl, n_values): the film's values,
+        less the incidence offset when it is inferred."""
+        values = super().predict(theta[..., :self.film_size], inputs)
+        offset = self.incidence_offset_of(theta)
+        if offset is None:
+            return values
+        values -= offset[..., None] * self.offset_scale
+        np.maximum(values, 0.0, out=values)
+        return values
 
     def unpack(self, theta):
         """``a`` (W, n_wl) and ``tau`` (W, n_wl, G) (the floor: :meth:`noise_floor_of`)."""
-        return super().unpack(theta[..., :-1])
+        return super().unpack(theta[..., :self.film_size])
 
     def flake_reflectance_of(self, theta):
         """The flakes' reflectance ``c`` of every block (W, n_wl) [-] (None without flakes)."""
-        return super().flake_reflectance_of(theta[..., :-1])
+        return super().flake_reflectance_of(theta[..., :self.film_size])
 
     def noise_floor_of(self, theta):
         """The floor ``sigma0`` of every block (W, n_wl) [units of the values]."""
-        return np.exp(theta[..., -1])
+        return np.exp(theta[..., self.film_size])
+
+    def incidence_offset_of(self, theta):
+        """The incidence offset ``b`` of every block (W, n_wl) [units of the values] (None when
+        it is not inferred)."""
+        return np.exp(theta[..., self.film_size + 1]) if self.incidence_offset else None
 
     def log_density(self, theta, values):
-        """Pointwise ``log N(x_obs | x, (eps x)^2 + sigma0^2)``, (W, n_wl, n_values).
+        """Pointwise ``log N(x_obs | m, (eps m)^2 + sigma0^2)``, (W, n_wl, n_values), ``values`` the
+        predicted readings ``m``.
 
         :func:`bayespig.likelihood.multiplicative_normal_logpdf` written on the variance (no
         ``hypot``, in place: this is half the joint run's time on 1439 geometries); the same
@@ -398,3 +447,17 @@ class NoiseFloorFilmLayout(FilmLayout):
         residual += _LOG_2PI
         residual *= -0.5
         return residual
+
+
+def incidence_offset_scale(problem):
+    """Per value of a problem, how the incidence offset enters it: ``1 / cos theta_i`` for a BRDF
+    channel, 0 for every other value (hemispherical, 45/0 and transmittance values are not
+    offset), shape (n_values,) [-] (:class:`NoiseFloorFilmLayout`)."""
+    parts = []
+    for film in problem.films:
+        if film.kind == "transmittance" or film.instrument is None:
+            parts.append(np.zeros(film.observed.shape[1]))
+            continue
+        parts.append(np.array([1.0 / np.cos(np.radians(ch.theta_i)) if ch.kind == "brdf" else 0.0
+                               for ch in film.instrument.channels]))
+    return np.concatenate(parts)

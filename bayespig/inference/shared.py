@@ -925,7 +925,8 @@ def sample_joint(model, specs, draws, priors, eps, settings, joint_seed, start_s
         Isotropic; a ForwardModel is its :class:`FilmLayout`. A film layout with more block
         coordinates than ``[a, log tau]`` (the inferred noise floor of
         :class:`bayespig.inference.roughness.NoiseFloorFilmLayout`, which has ``noise_floor_of``)
-        gives records with ``noise_floor``, and its floor enters the predictive draws.
+        gives records with ``noise_floor``, and its floor enters the predictive draws (and with
+        an inferred incidence offset, ``incidence_offset``).
     specs : sequence of SharedParameter
     draws : numpy.ndarray
         The pilot's draws (:func:`pilot_draws`): their medians are ``theta_hat``, and the walkers
@@ -968,6 +969,8 @@ def sample_joint(model, specs, draws, priors, eps, settings, joint_seed, start_s
     floor = None if noise_floor_of is None else noise_floor_of(blocks)
     flake_of = getattr(joint.layout, "flake_reflectance_of", None)
     flake = None if flake_of is None else flake_of(blocks)
+    offset_of = getattr(joint.layout, "incidence_offset_of", None)
+    offset = None if offset_of is None else offset_of(blocks)
     noisy = None
     if used.predictive_noise:
         rng = np.random.default_rng(run["predictive_seed"])
@@ -994,6 +997,8 @@ def sample_joint(model, specs, draws, priors, eps, settings, joint_seed, start_s
             record["noise_floor"] = floor[:, i].reshape(shape)
         if flake is not None:
             record["flake_reflectance"] = flake[:, i].reshape(shape)
+        if offset is not None:
+            record["incidence_offset"] = offset[:, i].reshape(shape)
         if noisy is not None:
             record["y_rep"] = noisy[:, i].reshape(shape + (-1,))
         records.append(record)
