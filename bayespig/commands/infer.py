@@ -71,6 +71,10 @@ def add_infer_parser(subparsers):
                         help="the films hold effect pigments (metal or pearlescent flakes): infer their lobe "
                              "around the mirror direction, a flake reflectance per band and one flake "
                              "roughness (needs --roughness free; BRDF or 45/0 channels)")
+    parser.add_argument("--incidence-offset", action="store_true",
+                        help="infer the gonioreflectometer's offset per band: each BRDF reading is "
+                             "max(f - b / cos theta_i, 0), a background subtracted in excess (exact zeros at "
+                             "grazing incidence are its sign); needs --roughness free and --noise-floor infer")
     parser.add_argument("--exclude-mirror", type=float, default=None, metavar="DEG",
                         help="drop the films' geometries within DEG degrees of the mirror direction")
     parser.add_argument("--max-angle", type=float, default=None, metavar="DEG",
@@ -174,6 +178,9 @@ def run_infer(args):
                          "surface's roughness)")
     if args.flakes and roughness != "free":
         raise ValueError("--flakes needs --roughness free (the flakes' roughness is inferred with the surface's)")
+    if args.incidence_offset and (roughness != "free" or noise_floor != "infer"):
+        raise ValueError("--incidence-offset needs --roughness free and --noise-floor infer (the offset is "
+                         "sampled with the surface and the floor)")
     wavelengths, wavelength_range = _wavelengths_argument(args.wavelengths)
     overrides = {name: value for name, value in (("n_walkers", args.walkers),
                                                  ("n_ensembles", args.ensembles),
@@ -191,7 +198,8 @@ def run_infer(args):
         idata = infer(measurements, method=args.method, seed=args.seed,
                       g=args.g, eps=eps, progress=not args.no_progress, settings=settings,
                       substrate_sd=args.substrate_sd, noise_floor=noise_floor, roughness=roughness,
-                      binder_index=binder_index, flakes=args.flakes, exclude_mirror_deg=args.exclude_mirror,
+                      binder_index=binder_index, flakes=args.flakes, incidence_offset=args.incidence_offset,
+                      exclude_mirror_deg=args.exclude_mirror,
                       max_angle_deg=args.max_angle,
                       wavelengths=wavelengths, wavelength_range=wavelength_range)
         flagged = diagnose(idata, warn=False)

@@ -2,7 +2,9 @@
 
 One row per wavelength, columns (``p`` is each per-wavelength parameter: ``a``, ``tau``, and
 ``tau_<group>`` for every film group when there are several, ``g`` when free, ``eps`` when
-inferred):
+inferred, and those of a gonio fit when inferred: ``flake_reflectance`` (the flakes' ``c``),
+``noise_floor`` (the additive floor ``sigma0`` [1/sr]) and ``incidence_offset`` (the instrument's
+offset ``b`` [1/sr], ``infer(..., incidence_offset=True)``)):
 
 ``wavelength_nm``
     Wavelength [nm].
@@ -71,7 +73,7 @@ def _parameters(idata):
             if k == 0:
                 continue  # tau is the first group's
             out.append((f"tau_{group}", posterior["tau_group"].isel(group=k).transpose("chain", "draw", "wavelength")))
-    for name in ("g", "eps", "flake_reflectance"):
+    for name in ("g", "eps", "flake_reflectance", "noise_floor", "incidence_offset"):
         if name in posterior:
             da = posterior[name]
             extra = [d for d in da.dims if d not in ("chain", "draw", "wavelength")]

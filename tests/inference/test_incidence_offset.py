@@ -7,11 +7,13 @@ from the look-up tables the inference uses, and the offset is applied to them he
 :class:`bayespig.inference.roughness.NoiseFloorFilmLayout`.
 """
 
+import csv
 import json
 
 import numpy as np
 import pytest
 
+from bayespig import cli
 from bayespig.data import simulate
 from bayespig.data.simulate import FilmSpec
 from bayespig.inference import infer
@@ -134,3 +136,45 @@ def test_incidence_offset_must_be_a_flag(offset_set):
     with pytest.raises(TypeError, match="incidence_offset"):
         infer(offset_set, eps=EPS_TRUE, settings=FAST, progress=False, roughness="free", noise_floor="infer",
               incidence_offset="yes")
+
+
+@pytest.mark.parametrize("options", [["--roughness", "free"], ["--noise-floor", "infer"]])
+def test_cli_offset_needs_a_free_roughness_and_an_inferred_floor(offset_set, tmp_path, capsys, options):
+    path = tmp_path / "paint.csv"
+    offset_set.to_csv(path)
+    status = cli.main(["infer", str(path), "--out", str(tmp_path / "out"), "--incidence-offset", "--no-progress",
+                       *options])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert err.strip().splitlines()[-1] == ("bayespig: error: --incidence-offset needs --roughness free and "
+                                            "--noise-floor infer (the offset is sampled with the surface and the "
+                                            "floor)")
+    assert "Traceback" not in err and not (tmp_path / "out").exists()
+
+
+def test_cli_passes_the_offset_and_summary_csv_has_its_columns(offset_set, offset_idata, tmp_path, monkeypatch):
+    # the sampling itself is tested above: here the command's wiring and its table, on the fixture's posterior
+    import bayespig.inference
+
+    path = tmp_path / "paint.csv"
+    offset_set.to_csv(path)
+    passed = {}
+
+    def recorded_infer(measurements, **kwargs):
+        passed.update(kwargs)
+        return offset_idata
+
+    monkeypatch.setattr(bayespig.inference, "infer", recorded_infer)
+    status = cli.main(["infer", str(path), "--out", str(tmp_path / "out"), "--eps", str(EPS_TRUE), "--roughness",
+                       "free", "--noise-floor", "infer", "--incidence-offset", "--no-progress"])
+    assert status == 0
+    assert passed["incidence_offset"] is True and passed["noise_floor"] == "infer" and passed["roughness"] == "free"
+    with open(tmp_path / "out" / "summary.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    for variable in ("incidence_offset", "noise_floor"):
+        draws = offset_idata.posterior[variable].transpose("chain", "draw", "wavelength").values.reshape(-1, 2)
+        for statistic, expected in (("median", np.median(draws, axis=0)),
+                                    ("ci90_low", np.quantile(draws, 0.05, axis=0)),
+                                    ("ci90_high", np.quantile(draws, 0.95, axis=0))):
+            written = [float(row[f"{variable}_{statistic}"]) for row in rows]
+            np.testing.assert_allclose(written, expected, rtol=1e-5)  # 6 significant digits written
