@@ -535,10 +535,12 @@ class JointLogPosterior:
         base[:-C] = inner
         steps = np.eye(base.size) * step
         points = np.concatenate([base + steps, base - steps])
+        # a prediction of exactly 0 (a reading clipped by the incidence offset) gives an infinite
+        # residual and an undefined difference: such values carry no sensitivity (0 below)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             values = self._predict_theta(points[:, :-C], points[:, -C:])
             residual = (self.observed / values - 1.0) / self.eps
-        derivative = (residual[:base.size] - residual[base.size:]) / (2.0 * step)  # (n_dim, n_wl, n_values)
+            derivative = (residual[:base.size] - residual[base.size:]) / (2.0 * step)  # (n_dim, n_wl, n_values)
         derivative = np.nan_to_num(derivative, nan=0.0, posinf=0.0, neginf=0.0)
         out = np.zeros((n_wl * self.block_size, C))
         for i in range(n_wl):
