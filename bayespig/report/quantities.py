@@ -30,6 +30,7 @@ the spectrum -- which is what a colour needs.
 
 from __future__ import annotations
 
+import itertools
 import json
 import re
 from collections.abc import Mapping
@@ -46,6 +47,7 @@ from ..instruments import Channel, Instrument
 from ..likelihood import FilmTerm, Priors, Problem, noise_sd
 
 __all__ = [
+    "BEYOND_LOBE_BINS_DEG",
     "COLOUR_MATCH_DELTA_E",
     "DEFAULT_EPS",
     "EPS_SOURCE_ATTR",
@@ -1396,3 +1398,63 @@ def gonio_residual_summary(residuals, bins=MIRROR_DISTANCE_BINS_DEG):
             "measured": measured, "relative": relative, "classes": labels, "count": count,
             "median_abs_all": np.nanmedian(magnitude, axis=1) if index.size else np.full(magnitude.shape[0], np.nan),
             "median_abs_by_class": by_class}
+
+
+#: Distance-from-the-mirror classes of :func:`beyond_surface_lobe` [deg].
+BEYOND_LOBE_BINS_DEG = (2.0, 10.0, 20.0, 30.0, 45.0, 60.0, 90.0, 180.0)
+
+
+def beyond_surface_lobe(gonio, *, roughness, binder_index, bins=BEYOND_LOBE_BINS_DEG, max_angle_deg=60.0):
+    """The light beyond the first-surface lobe, measured and fitted, by distance from the mirror.
+
+    A rough fit's BRDF is the first-surface lobe (Walter et al. 2007, eq. 20; one GGX
+    ``alpha`` for all bands) plus what the layer sends back (the body, effect-pigment flakes).
+    Measured less that lobe is what the data say the layer sends back at each geometry: for
+    an isotropic body under a rough surface it is nearly flat away from grazing, so a rise
+    towards the mirror that follows the body's colour is light the isotropic body does not
+    make (flakes, a glossy reflector under a clear coat), and a rise at dark bands is a lobe
+    whose shape is not GGX. The fitted column is the posterior-median prediction less the same
+    lobe: where it follows the measured one, the model reproduces that light.
+
+    Parameters
+    ----------
+    gonio : dict
+        :func:`gonio_residual_summary` of the fit.
+    roughness, binder_index : float
+        The surface's GGX ``alpha`` and the binder index of the lobe (e.g. the posterior
+        medians) [-].
+    bins : sequence of float
+        Edges of the distance-from-the-mirror classes [deg] (geometries outside them are left
+        out).
+    max_angle_deg : float
+        Only geometries with ``theta_i`` and ``theta_o`` at most this [deg] (grazing readings
+        carry the incidence offset and the lobe's steep shadowing).
+
+    Returns
+    -------
+    dict
+        ``classes`` (labels), ``count`` (geometries per class), ``measured`` and ``fitted``
+        (n_wavelengths, n_classes): medians of ``x - f_lobe`` over each class [1/sr] (NaN for
+        an empty class).
+    """
+    from ..physics.forward import first_surface_brdf
+
+    geometry = gonio["geometry"]
+    lobe = first_surface_brdf(geometry["theta_i"], geometry["theta_o"], geometry["delta_phi"],
+                              roughness=float(roughness), n=float(binder_index))
+    distance = geometry["mirror_distance_deg"]
+    keep = (geometry["theta_i"] <= max_angle_deg) & (geometry["theta_o"] <= max_angle_deg)
+    bins = np.asarray(bins, dtype=float)
+    classes = list(itertools.pairwise(bins))
+    labels = [f"{low:g}-{high:g}°" for low, high in classes]
+    measured = np.asarray(gonio["measured"], dtype=float) - lobe
+    fitted = np.asarray(gonio["fitted_median"], dtype=float) - lobe
+    out = {"classes": labels, "count": [], "measured": np.full((measured.shape[0], len(labels)), np.nan)}
+    out["fitted"] = out["measured"].copy()
+    for c, (low, high) in enumerate(classes):
+        member = keep & (distance > low) & (distance <= high)
+        out["count"].append(int(member.sum()))
+        if member.any():
+            out["measured"][:, c] = np.median(measured[:, member], axis=1)
+            out["fitted"][:, c] = np.median(fitted[:, member], axis=1)
+    return out

@@ -39,7 +39,7 @@ import numpy as np
 
 from .._atomic import write_file_set
 from ..data import MeasurementSet, read_measurements
-from ..inference import InferenceSettings, infer
+from ..inference import InferenceSettings, diagnose, infer, summarize
 from ..report import figures as figs
 from ..report import quantities as q
 from ..selection import mirror_distance_deg, select_measurements
@@ -79,6 +79,8 @@ INTERVAL = 0.90
 FIGURE_INCIDENCES = (10.0, 30.0, 50.0, 70.0)
 #: Bands of the plane-of-incidence figure [nm].
 FIGURE_BANDS_NM = (450.0, 550.0, 650.0)
+#: Bands of the table of the light beyond the surface lobe [nm].
+BEYOND_LOBE_BANDS_NM = (450.0, 500.0, 550.0, 600.0, 650.0, 700.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -212,10 +214,11 @@ def fit_summary(idata, *, interval=INTERVAL):
         :func:`~bayespig.report.quantities.posterior_predictive_check` and its ``status``;
         ``edges``: :func:`~bayespig.report.quantities.prior_edges`; ``gonio``: the residual
         summary; ``n_steps``, ``max_steps_reached``; ``diagnostics``: lines of
-        :func:`bayespig.inference.diagnose`.
+        :func:`bayespig.inference.diagnose`; ``a_mixed`` (n_bands,): whether ``a`` passed
+        R-hat <= :data:`~bayespig.report.quantities.RHAT_MAX` and bulk and tail ESS >=
+        :data:`~bayespig.report.quantities.ESS_MIN` at that band (its interval represents
+        the posterior; a run capped at ``max_steps`` may still pass).
     """
-    from ..inference import diagnose
-
     tail = (1.0 - interval) / 2.0
     wl = q.wavelengths(idata)
     a = q.posterior_draws(idata, "a")
@@ -248,6 +251,9 @@ def fit_summary(idata, *, interval=INTERVAL):
     out["n_steps"] = [int(n) for n in np.atleast_1d(stats["n_steps"].values)]
     out["max_steps_reached"] = bool(np.any(stats["max_steps_reached"].values))
     out["diagnostics"] = list(diagnose(idata, warn=False))
+    table = summarize(idata)
+    out["a_mixed"] = ((table["a_r_hat"].values <= q.RHAT_MAX) & (table["a_ess_bulk"].values >= q.ESS_MIN)
+                      & (table["a_ess_tail"].values >= q.ESS_MIN))
     return out
 
 
@@ -261,6 +267,37 @@ def _infer(measurements, settings, **kwargs):
     summary["seconds"] = time.perf_counter() - started
     summary["warnings"] = sorted({str(w.message) for w in caught})
     return summary
+
+
+def _mixing_note(result):
+    """How many of a paint's overlapping subset bands have a subset run whose ``a`` did not mix."""
+    mixed = result["far"]["a_mixed"] & result["near"]["a_mixed"]
+    overlap = result["overlap"]
+    unmixed = int(np.sum(overlap & ~mixed))
+    if not unmixed:
+        return "; both runs' a mixed at every overlapping band"
+    return (f"; at {unmixed} of the {int(overlap.sum())} overlapping bands a subset run's a did not mix, "
+            f"so {int(np.sum(overlap & mixed))} of {overlap.size} overlap with both runs mixed")
+
+
+def _beyond_lobe_lines(result, wl):
+    """The report's table of the light beyond the surface lobe (full fit), at :data:`BEYOND_LOBE_BANDS_NM`."""
+    full = result["full"]
+    if full["roughness"] is None:
+        return []
+    n = full["binder_index"][1] if full["binder_index"] is not None else result["instrument_binder_index"]
+    beyond = q.beyond_surface_lobe(full["gonio"], roughness=full["roughness"][1], binder_index=n)
+    bands = [int(np.argmin(np.abs(wl - b))) for b in _present(wl, BEYOND_LOBE_BANDS_NM)]
+    keep = [c for c, count in enumerate(beyond["count"]) if count]
+    return [("Light beyond the surface lobe (full fit): measured BRDF less the first-surface lobe at the "
+             f"posterior-median roughness {full['roughness'][1]:.4f} and binder index {n:.4f}, median over the "
+             "geometries with theta_i, theta_o <= 60° in each class of distance from the mirror [1/sr]; in "
+             "brackets the fitted BRDF less the same lobe. For an isotropic body under the rough surface it is "
+             "nearly flat over the classes; a rise towards the mirror is light the body does not make (at bright "
+             "bands: the flakes' lobe takes it; at dark bands: a lobe whose shape is not GGX)."), "",
+            _table(["band [nm]"] + [f"{beyond['classes'][c]} ({beyond['count'][c]})" for c in keep],
+                   [[f"{wl[i]:g}"] + [f"{beyond['measured'][i, c]:.4f} ({beyond['fitted'][i, c]:.4f})" for c in keep]
+                    for i in bands]), ""]
 
 
 def _rough_instrument(measurements):
@@ -305,7 +342,8 @@ def cornell_study(folder=None, settings=None, paints=None, progress=None, jobs=1
     dict
         ``folder``, ``settings``, ``paints``: per paint ``full``, ``smooth``, ``far``, ``near``
         (and ``no_flakes`` with ``settings.flakes``) (:func:`fit_summary`), ``overlap`` (bool per
-        subset band), ``counts`` (geometries of each fit) and ``seconds``.
+        subset band), ``counts`` (geometries of each fit), ``instrument_binder_index`` (the
+        binder index of the tables, the fits' when it is not inferred) and ``seconds``.
     """
     from .._pool import executor_or_local_pool
 
@@ -346,6 +384,7 @@ def _study_paint(folder, settings, paint, progress, started):
     near = mirror_band_subset(measurements, MIRROR_CUT_DEG, SUBSET_SPLIT_DEG, SUBSET_MAX_ANGLE_DEG)
     result = {"counts": {"all": _n_geometries(measurements), "full": _n_geometries(full),
                          "far": _n_geometries(far), "near": _n_geometries(near)}}
+    result["instrument_binder_index"] = _rough_instrument(full).n
     bands = None if settings.full_bands is None else list(settings.full_bands)
     surface = {"roughness": "free", "binder_index": settings.binder_index, "flakes": settings.flakes,
                "incidence_offset": settings.incidence_offset}
@@ -514,7 +553,7 @@ def cornell_report(study):
                   f"{int(np.sum(body_res <= RESIDUAL_GOAL))} of {body_res.size} bands within)."),
                   (f"- Subset intervals overlap at >= {_pct(OVERLAP_GOAL)} of bands: "
                   f"**{'met' if overlap_ok else 'NOT met'}** ({int(overlap.sum())} of {overlap.size} bands, "
-                  f"{_pct(share)})."), ""]
+                  f"{_pct(share)}" + _mixing_note(result) + ")."), ""]
         # a(lambda) table
         check = full["check"]
         lines += ["### a(λ), noise floor, residuals and the model check (full fit)", "",
@@ -558,6 +597,7 @@ def cornell_report(study):
                   _table(["band [nm]"] + [f"{c} ({n})" for c, n in zip(gonio["classes"], gonio["count"])],
                          [[f"{w:g}"] + [_pct(v) for v in gonio["median_abs_by_class"][i]]
                           for i, w in enumerate(wl)]), ""]
+        lines += _beyond_lobe_lines(result, wl)
         # figures from the report package
         geometry = gonio["geometry"]
         incidences = [t for t in FIGURE_INCIDENCES if np.any(np.isclose(geometry["theta_i"], t))]
@@ -594,9 +634,14 @@ def cornell_report(study):
         rows = []
         for k, w in enumerate(far["wavelength_nm"]):
             rows.append([f"{w:g}", _interval(*far["a"][[0, 1, 2], k]), _interval(*near["a"][[0, 1, 2], k]),
-                         "yes" if overlap[k] else "**no**", _pct(far["residual"][k]), _pct(near["residual"][k])])
-        lines += [_table(["band [nm]", f"a, > {SUBSET_SPLIT_DEG:g}°", f"a, {MIRROR_CUT_DEG:g}-{SUBSET_SPLIT_DEG:g}°",
-                          "90 % intervals overlap", "residual far", "residual near"], rows), ""]
+                         "yes" if overlap[k] else "**no**",
+                         " / ".join("yes" if fit["a_mixed"][k] else "**no**" for fit in (far, near)),
+                         _pct(far["residual"][k]), _pct(near["residual"][k])])
+        lines += [(f"a mixed: R-hat(a) <= {q.RHAT_MAX:g} and bulk and tail ESS(a) >= {q.ESS_MIN:g} at that band "
+                   "in the far / near run; where it is no, that run's interval is not a converged estimate, and "
+                   "an overlap there may rest on chains that disagree."), "",
+                  _table(["band [nm]", f"a, > {SUBSET_SPLIT_DEG:g}°", f"a, {MIRROR_CUT_DEG:g}-{SUBSET_SPLIT_DEG:g}°",
+                          "90 % intervals overlap", "a mixed: far / near", "residual far", "residual near"], rows), ""]
         # smooth comparison
         lines += ["### Smooth surface (roughness 0) for comparison", "",
                   (f"Same full geometry set, bands {', '.join(f'{b:g}' for b in smooth['wavelength_nm'])} nm. "

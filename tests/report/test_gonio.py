@@ -183,3 +183,42 @@ def test_gonio_figures_have_one_panel_per_incidence_with_labelled_axes():
         "400 nm fit", "400 nm measured", "700 nm fit", "700 nm measured", "mirror direction"]
     polar = residual_map_figure(gonio, shown)
     assert [ax.get_title() for ax in polar.axes if ax.name == "polar"] == [f"incidence {t:g}°" for t in shown]
+
+
+def test_beyond_surface_lobe_is_the_reading_less_walters_lobe_per_mirror_distance_class():
+    """Readings made of Walter's lobe plus a known remainder per class give that remainder back;
+    grazing geometries (theta > 60 deg) and empty classes are left out."""
+    from bayespig.physics.forward import first_surface_brdf
+    from bayespig.report.quantities import (
+        BEYOND_LOBE_BINS_DEG,
+        beyond_surface_lobe,
+        gonio_residual_summary,
+        gonio_values,
+    )
+
+    angles = [(ti, to, dp) for ti in (10.0, 30.0, 50.0, 70.0) for to in (0.0, 15.0, 35.0, 55.0, 75.0)
+              for dp in (0.0, 180.0)]
+    rows = [{"sample": "s", "channel": f"{ti:g}/{to:g}/{dp:g}", "kind": "brdf", "film_group": ""}
+            for ti, to, dp in angles]
+    geometry = gonio_values(rows)
+    ti, to, dp = (np.array(v) for v in zip(*angles))
+    lobe = first_surface_brdf(ti, to, dp, roughness=0.2, n=1.5)
+    bins = np.asarray(BEYOND_LOBE_BINS_DEG)
+    classes = np.searchsorted(bins, geometry["mirror_distance_deg"], side="left") - 1  # (low, high]
+    remainder = np.array([[0.01], [0.05]]) * (1.0 + classes)  # two bands; one value per class
+    measured = lobe + remainder
+    fitted = lobe + 0.5 * remainder
+    gonio = gonio_residual_summary({"rows": rows, "predicted_draws": np.broadcast_to(fitted, (3,) + fitted.shape),
+                                    "observed": measured})
+    beyond = beyond_surface_lobe(gonio, roughness=0.2, binder_index=1.5)
+    keep = (ti <= 60.0) & (to <= 60.0) & (geometry["mirror_distance_deg"] > bins[0])
+    for c, label in enumerate(beyond["classes"]):
+        member = keep & (classes == c)
+        assert beyond["count"][c] == int(member.sum())
+        if member.any():
+            assert beyond["measured"][:, c] == pytest.approx([0.01 * (1 + c), 0.05 * (1 + c)], rel=1e-9)
+            assert beyond["fitted"][:, c] == pytest.approx([0.005 * (1 + c), 0.025 * (1 + c)], rel=1e-9)
+        else:
+            assert np.isnan(beyond["measured"][:, c]).all()
+    assert sum(beyond["count"]) == int(keep.sum()) < len(rows)  # grazing and near-mirror rows left out
+    assert beyond["classes"][0] == "2-10°"

@@ -112,6 +112,17 @@ def test_tiny_study_report_structure(tiny_study, tmp_path):
     assert said == expected.tolist()
     n = int(expected.sum())
     assert f"({n} of 2 bands" in text
+    # the mixing column is the fits' own R-hat / ESS verdict on a, and the goal line counts the
+    # overlaps that rest on a run whose a did not mix
+    mixed = [tuple(c.strip() for c in cells.split("|")[5].split("/")) for cells in table.splitlines()
+             if re.match(r"\| \d", cells)]
+    assert mixed == [tuple("yes" if result[fit]["a_mixed"][k] else "**no**" for fit in ("far", "near"))
+                     for k in range(2)]
+    both = result["far"]["a_mixed"] & result["near"]["a_mixed"]
+    unmixed = int(np.sum(expected & ~both))
+    assert ((f"at {unmixed} of the {n} overlapping bands a subset run's a did not mix" in text) if unmixed
+            else "both runs' a mixed at every overlapping band" in text)
+    assert "Light beyond the surface lobe (full fit)" in text
 
 
 def test_the_paints_fitted_at_once_give_the_same_study(tiny_study):
