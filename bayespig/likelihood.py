@@ -25,6 +25,16 @@ within the floor); without a floor they must be ``> 0`` (eq. 7 gives an observed
 likelihood 0 for any model value). NaN and infinite values are refused either way
 (:func:`check_observed`, naming film, value and band). The model value must be ``> 0``.
 
+Censored zeros
+--------------
+An instrument that clips its readings at 0 reports ``max(x, 0)``: an exact 0 then says only
+``x <= 0``, whose probability is ``Phi(-x_model / sigma)`` (:func:`censored_zero_logpdf`; Tobit's
+censored normal model). With ``censored_zeros=True`` (needs a floor) every observed value of
+exactly 0 enters with that probability instead of the Gaussian density at 0; the positive
+readings keep their density. The density at 0 is not the probability of a 0: it carries a
+factor ``1 / sigma``, so many zeros fitted by a model value near 0 pull the floor towards its
+prior's lower edge, and it makes readings below a clipped model value indistinguishable.
+
 A :class:`Problem` is what a measurement set says about one pigment: for every film
 its instrument, substrate albedo ``r_s(λ)``, whether it is opaque, which films
 share ``tau`` (film groups), and the observed values. The paper's methods 1–4
@@ -40,6 +50,7 @@ import os
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.special import log_ndtr
 
 from ._validation import broadcast, real_array
 from .instruments import Instrument
@@ -55,6 +66,8 @@ __all__ = [
     "Priors",
     "Problem",
     "WavelengthModel",
+    "censored_zero_logpdf",
+    "censored_zeros_argument",
     "check_observed",
     "method_name",
     "multiplicative_normal_logpdf",
@@ -166,6 +179,49 @@ def multiplicative_normal_logpdf(observed, model, eps, noise_floor=0.0):
                    (("observed", observed), ("model", model), ("eps", eps), ("noise_floor", noise_floor))}
         broadcast(**checked)
         raise
+
+
+def censored_zero_logpdf(mean, variance):
+    """Log-probability that a reading clipped at 0 is exactly 0: ``log Phi(-mean / sigma)``.
+
+    An instrument that reports ``max(x, 0)`` of a Gaussian reading ``x ~ N(mean, sigma^2)``
+    (``sigma^2 = (eps f)^2 + sigma0^2``, the module docstring) records an exact 0 with
+    probability ``P(x <= 0) = Phi(-mean / sigma)``: the reading is *censored* at 0 (Tobit's
+    model), and that probability, not the density at 0, is its likelihood. Unlike the density
+    it has no ``1 / sigma`` factor, so a set with many zeros does not pull the floor to 0, and
+    it keeps falling as the mean rises above 0 and tends to 1 as the mean falls below it
+    (the Gaussian density of a clipped mean is flat there).
+
+    Parameters
+    ----------
+    mean : array_like
+        Mean of the reading before clipping [units of the values]; any sign.
+    variance : array_like
+        Its variance ``sigma^2 > 0`` [units squared].
+
+    Returns
+    -------
+    numpy.ndarray
+        ``log Phi(-mean / sqrt(variance))``, broadcast; accurate far in the tail
+        (:func:`scipy.special.log_ndtr`).
+    """
+    return log_ndtr(-np.asarray(mean, dtype=float) / np.sqrt(variance))
+
+
+def censored_zeros_argument(censored_zeros, noise_floor, name="censored_zeros"):
+    """``censored_zeros`` checked: a bool, True only with a noise floor (``noise_floor`` checked).
+
+    Raises
+    ------
+    TypeError, ValueError
+        Naming ``name``.
+    """
+    if not isinstance(censored_zeros, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {type(censored_zeros).__name__} {censored_zeros!r}")
+    if censored_zeros and noise_floor is None:
+        raise ValueError(f"{name}=True needs a noise floor (noise_floor a number > 0 or 'infer'): without one "
+                         "eq. (7) gives a reading of 0 no probability")
+    return bool(censored_zeros)
 
 
 def noise_floor_argument(noise_floor, name="noise_floor"):
@@ -903,13 +959,18 @@ class LogPosterior:
         none (eq. 7 alone, the exact code path of before), a known number, or ``"infer"``:
         one floor per wavelength shared by all its values, log-uniform on
         ``priors.noise_floor_range``.
+    censored_zeros : bool
+        Observed values of exactly 0 are readings censored at 0: their term is
+        ``log Phi(-m / sigma)`` (:func:`censored_zero_logpdf`) instead of the density at 0.
+        Needs a noise floor.
 
     References
     ----------
     Ershov, Voloboy & Pozdnyakov (2023), eq. (7) (noise model).
     """
 
-    def __init__(self, model, index, priors=Priors(), g="isotropic", eps=0.05, noise_floor=None):
+    def __init__(self, model, index, priors=Priors(), g="isotropic", eps=0.05, noise_floor=None,
+                 censored_zeros=False):
         if g not in ("isotropic", "free"):
             raise ValueError(f"g must be 'isotropic' or 'free', got {g!r}")
         if g == "free" and model.g != "free":
@@ -950,6 +1011,9 @@ class LogPosterior:
         #: Known floor [units of the values], 0.0 for none or when inferred.
         self.noise_floor = 0.0 if noise_floor in (None, "infer") else float(noise_floor)
         self.has_noise_floor = noise_floor is not None
+        self.censored_zeros = censored_zeros_argument(censored_zeros, noise_floor)
+        #: Where the observed values are exactly 0 (censored readings when ``censored_zeros``).
+        self._zero = self._observed == 0
         if self.infer_noise_floor:
             names.append("log_noise_floor")
         self.parameter_names = tuple(names)
@@ -975,6 +1039,7 @@ class LogPosterior:
     @observed.setter
     def observed(self, values):
         self._observed = np.asarray(values, dtype=float).reshape(self._observed.shape).copy()
+        self._zero = self._observed == 0
 
     @property
     def n_dim(self):
@@ -1012,7 +1077,8 @@ class LogPosterior:
         """Log-likelihood of eq. (7) per parameter vector (``-inf`` outside the support).
 
         With a noise floor, that of :func:`multiplicative_normal_logpdf` with the floor (the
-        variance ``(eps m)^2 + sigma0^2``); without one the code path of eq. (7) alone.
+        variance ``(eps m)^2 + sigma0^2``), the observed zeros censored with ``censored_zeros``;
+        without one the code path of eq. (7) alone.
 
         With ``pointwise=True`` the terms per measured value, shape (n, n_values).
         ``member`` (n,) is the stack position of every row (required for a stack).
@@ -1044,6 +1110,9 @@ class LogPosterior:
                 variance = (model * np.exp(log_eps)) ** 2 + floor * floor
                 residual = observed - model
                 value = -0.5 * (residual * residual / variance + np.log(variance) + _LOG_2PI)
+                if self.censored_zeros:  # a reading of exactly 0: log P(reading <= 0)
+                    zero = self._zero[0] if self._zero.shape[0] == 1 else self._zero[member]
+                    value = np.where(zero, censored_zero_logpdf(model, variance), value)
                 value = np.where(model > 0, value, -np.inf)
                 if not pointwise:
                     value = value.sum(axis=1)

@@ -13,6 +13,8 @@ from bayespig.likelihood import (
     LogPosterior,
     Priors,
     Problem,
+    censored_zero_logpdf,
+    censored_zeros_argument,
     check_observed,
     multiplicative_normal_logpdf,
     noise_floor_argument,
@@ -188,3 +190,58 @@ def test_zero_model_value_has_zero_likelihood_with_a_floor(method3):
 def test_priors_refuse_an_empty_floor_range():
     with pytest.raises(ValueError, match="noise_floor_range must satisfy low < high inside"):
         Priors(noise_floor_range=(0.0, 1.0))
+
+
+def test_censored_zero_is_the_normal_cdf_at_zero_deep_into_both_tails():
+    # scipy's normal log-cdf is the independent reference; log_ndtr keeps its accuracy where
+    # Phi underflows (a model 40 sigma above 0: log Phi = -804.6)
+    mean = np.array([-3e-3, -1e-4, 0.0, 1e-4, 2e-3, 0.04])
+    variance = np.full(mean.shape, 1e-3) ** 2
+    expected = stats.norm.logcdf(0.0, loc=mean, scale=1e-3)
+    np.testing.assert_allclose(censored_zero_logpdf(mean, variance), expected, rtol=1e-12, atol=LOGPDF_ABS_TOL)
+    assert censored_zero_logpdf(0.0, 1.0) == pytest.approx(np.log(0.5), abs=LOGPDF_ABS_TOL)
+    assert np.isfinite(censored_zero_logpdf(0.04, 1e-6))
+
+
+def test_censored_zero_is_the_probability_of_a_clipped_reading_by_monte_carlo():
+    # readings max(m + sigma xi, 0): the fraction of exact zeros is Phi(-m / sigma)
+    rng = np.random.default_rng(11)
+    n = 200_000
+    for m, sigma in ((0.002, 0.003), (-0.001, 0.002), (0.01, 0.004)):
+        zeros = np.mean(np.maximum(m + sigma * rng.standard_normal(n), 0.0) == 0.0)
+        expected = np.exp(censored_zero_logpdf(m, sigma ** 2))
+        # binomial sd of the fraction; 4.5 sd (see tests/inference/common.py MC_Z)
+        assert abs(zeros - expected) <= 4.5 * np.sqrt(expected * (1 - expected) / n), (m, sigma, zeros, expected)
+
+
+def test_log_posterior_censors_the_zeros_and_leaves_the_rest(method3):
+    problem, model = method3
+    rng = np.random.default_rng(12)
+    floor = 2e-3
+    theta = np.column_stack([rng.uniform(0, 1, 30), rng.uniform(np.log(0.01), np.log(100), 30)])
+    plain = LogPosterior(model, 0, Priors(), eps=0.04, noise_floor=floor)
+    censored = LogPosterior(model, 0, Priors(), eps=0.04, noise_floor=floor, censored_zeros=True)
+    observed = np.array(problem.observed(0), dtype=float)
+    observed[[0, 2]] = 0.0
+    plain.observed = censored.observed = observed
+    predicted = model.predict(0, theta[:, 0], np.exp(theta[:, 1:]))
+    scale = np.sqrt((0.04 * predicted) ** 2 + floor ** 2)
+    expected = stats.norm.logpdf(observed, loc=predicted, scale=scale)
+    expected[:, [0, 2]] = stats.norm.logcdf(0.0, loc=predicted[:, [0, 2]], scale=scale[:, [0, 2]])
+    terms = censored.log_likelihood(theta, pointwise=True)
+    np.testing.assert_allclose(terms, expected, rtol=SAME_INTERPOLANT_REL_TOL, atol=LOGPDF_ABS_TOL)
+    positive = observed > 0
+    assert np.array_equal(terms[:, positive], plain.log_likelihood(theta, pointwise=True)[:, positive])
+    assert censored.censored_zeros and not plain.censored_zeros
+
+
+def test_censored_zeros_argument():
+    assert censored_zeros_argument(True, "infer") is True
+    assert censored_zeros_argument(False, None) is False
+    with pytest.raises(ValueError) as caught:
+        censored_zeros_argument(True, None)
+    assert str(caught.value) == ("censored_zeros=True needs a noise floor (noise_floor a number > 0 or 'infer'): "
+                                 "without one eq. (7) gives a reading of 0 no probability")
+    with pytest.raises(TypeError) as caught:
+        censored_zeros_argument("yes", "infer")
+    assert str(caught.value) == "censored_zeros must be True or False, got str 'yes'"

@@ -75,6 +75,9 @@ def add_infer_parser(subparsers):
                         help="infer the gonioreflectometer's offset per band: each BRDF reading is "
                              "max(f - b / cos theta_i, 0), a background subtracted in excess (exact zeros at "
                              "grazing incidence are its sign); needs --roughness free and --noise-floor infer")
+    parser.add_argument("--censored-zeros", action="store_true",
+                        help="the observed zeros are readings the instrument clipped at 0: their likelihood "
+                             "is P(reading <= 0), not the Gaussian density at 0; needs --noise-floor")
     parser.add_argument("--exclude-mirror", type=float, default=None, metavar="DEG",
                         help="drop the films' geometries within DEG degrees of the mirror direction")
     parser.add_argument("--max-angle", type=float, default=None, metavar="DEG",
@@ -181,6 +184,9 @@ def run_infer(args):
     if args.incidence_offset and (roughness != "free" or noise_floor != "infer"):
         raise ValueError("--incidence-offset needs --roughness free and --noise-floor infer (the offset is "
                          "sampled with the surface and the floor)")
+    if args.censored_zeros and noise_floor is None:
+        raise ValueError("--censored-zeros needs --noise-floor (a number > 0 or infer): without a floor a "
+                         "reading of 0 has no probability")
     wavelengths, wavelength_range = _wavelengths_argument(args.wavelengths)
     overrides = {name: value for name, value in (("n_walkers", args.walkers),
                                                  ("n_ensembles", args.ensembles),
@@ -199,7 +205,7 @@ def run_infer(args):
                       g=args.g, eps=eps, progress=not args.no_progress, settings=settings,
                       substrate_sd=args.substrate_sd, noise_floor=noise_floor, roughness=roughness,
                       binder_index=binder_index, flakes=args.flakes, incidence_offset=args.incidence_offset,
-                      exclude_mirror_deg=args.exclude_mirror,
+                      censored_zeros=args.censored_zeros, exclude_mirror_deg=args.exclude_mirror,
                       max_angle_deg=args.max_angle,
                       wavelengths=wavelengths, wavelength_range=wavelength_range)
         flagged = diagnose(idata, warn=False)

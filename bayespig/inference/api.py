@@ -14,6 +14,7 @@ from ..likelihood import (
     ForwardModel,
     LogPosterior,
     Problem,
+    censored_zeros_argument,
     check_observed,
     multiplicative_normal_logpdf,
 )
@@ -196,14 +197,15 @@ def _pilot_blocks(pilot, problem, floored):
 
 
 def _sample_shared(problem, model, priors, eps, settings, seed, specs, executor, progress, noise_floor=None,
-                   incidence_offset=False):
+                   incidence_offset=False, censored_zeros=False):
     """Joint run over all wavelengths with the shared parameters ``specs`` (:mod:`bayespig.inference.shared`).
 
     The pilot is a short per-wavelength run of the problem as given (the specs' nominal values,
     e.g. every card at its stated albedo, the model's roughness; :data:`PILOT_TARGET_ESS`).
     With ``noise_floor="infer"`` the blocks carry one floor per wavelength
     (:class:`~bayespig.inference.roughness.NoiseFloorFilmLayout`), and with ``incidence_offset``
-    one incidence offset per wavelength after it (its start: :func:`_with_offset_starts`).
+    one incidence offset per wavelength after it (its start: :func:`_with_offset_starts`), the
+    zeros censored with ``censored_zeros`` (the pilot's too).
     Returns what :func:`~bayespig.inference.shared.sample_joint` returns.
     """
     pilot_seed, joint_seed, start_seed = np.random.SeedSequence(int(seed)).spawn(3)
@@ -219,8 +221,9 @@ def _sample_shared(problem, model, priors, eps, settings, seed, specs, executor,
         warnings.simplefilter("ignore", ConvergenceWarning)
         pilot = infer_problem(problem, seed=int(pilot_seed.generate_state(1)[0]), g="isotropic", eps=eps,
                               executor=executor, progress=progress, priors=priors, settings=pilot_settings,
-                              tables=model.tables, noise_floor=noise_floor, roughness=model.roughness)
-    layout = NoiseFloorFilmLayout(model, priors, eps, incidence_offset) if floored else model
+                              tables=model.tables, noise_floor=noise_floor, roughness=model.roughness,
+                              censored_zeros=censored_zeros)
+    layout = NoiseFloorFilmLayout(model, priors, eps, incidence_offset, censored_zeros) if floored else model
     draws = _pilot_blocks(pilot, problem, floored)
     if model.flakes:
         flake_seed = np.random.SeedSequence(int(seed)).spawn(4)[3]
@@ -295,7 +298,7 @@ def _with_offset_starts(draws, layout, specs, priors, seed):
 
 def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, progress=True,
                   priors=None, settings=None, tables=None, shared=None, noise_floor=None, roughness=0.0,
-                  incidence_offset=False):
+                  incidence_offset=False, censored_zeros=False):
     """Posterior samples of a :class:`~bayespig.likelihood.Problem` at every wavelength.
 
     Parameters as :func:`infer`, except ``eps``: a positive number (known, for films without
@@ -307,7 +310,8 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     ``"infer"``); ``roughness``: the films' surface roughness, a number >= 0 (0: smooth, the
     smooth tables; > 0: the rough tables, opaque films only), the nominal value of a
     :class:`~bayespig.inference.roughness.RoughnessSpec` in ``shared``; ``incidence_offset`` as
-    in :func:`infer` (needs ``shared`` and ``noise_floor="infer"``).
+    in :func:`infer` (needs ``shared`` and ``noise_floor="infer"``); ``censored_zeros`` as in
+    :func:`infer` (needs a noise floor).
 
     Returns
     -------
@@ -325,6 +329,7 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     progress = check_flag("progress", progress)
     priors, settings = check_priors(priors), check_settings(settings)
     noise_floor = noise_floor_argument(noise_floor)
+    censored_zeros = censored_zeros_argument(censored_zeros, noise_floor)
     shared = tuple(shared) if shared is not None else ()
     roughness = roughness_argument(roughness)
     if roughness is None or roughness == "free":
@@ -344,7 +349,7 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
     model = ForwardModel(problem, g=g, tables=tables, roughness=roughness,
                          binder_index_free=any(isinstance(spec, BinderIndexSpec) for spec in shared),
                          flakes=any(isinstance(spec, FlakeRoughnessSpec) for spec in shared))
-    log_post0 = LogPosterior(model, 0, priors, g=g, eps=eps, noise_floor=noise_floor)
+    log_post0 = LogPosterior(model, 0, priors, g=g, eps=eps, noise_floor=noise_floor, censored_zeros=censored_zeros)
     _check_eps_identifiable(problem, log_post0)
     n_wl = problem.n_wavelengths
     starts, fit = _point_starts(problem, g, model.tables, priors, log_post0, n_wl)
@@ -353,14 +358,15 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
         if g != "isotropic" or eps is None:
             raise ValueError(f"{' and '.join(spec.title for spec in shared)} need g='isotropic' and a known eps")
         results, shared_draws, settings, joint = _sample_shared(
-            problem, model, priors, eps, settings, seed, shared, executor, progress, noise_floor, incidence_offset)
+            problem, model, priors, eps, settings, seed, shared, executor, progress, noise_floor, incidence_offset,
+            censored_zeros)
     else:
         seeds = np.random.SeedSequence(int(seed)).spawn(n_wl)
         # the stacks of wavelengths sampled together depend on the settings only (never on the
         # executor), so the samples do not depend on how the tasks are run
         per_run = settings.wavelengths_per_run
         tasks = [_Task(problem, g, eps, priors, settings, tuple(range(i, min(i + per_run, n_wl))),
-                       starts[i:i + per_run], tuple(seeds[i:i + per_run]), noise_floor, roughness)
+                       starts[i:i + per_run], tuple(seeds[i:i + per_run]), noise_floor, roughness, censored_zeros)
                  for i in range(0, n_wl, per_run)]
         if executor is None and len(tasks) == 1:  # runs here: the tables loaded for the point fit
             _WORKER_TABLES.setdefault((g, problem.n, roughness), {}).update(model.tables)
@@ -393,7 +399,8 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
 def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, executor=None,
           progress=True, priors=None, settings=None, substrate_sd=None, noise_floor=None,
           exclude_mirror_deg=None, max_angle_deg=None, wavelengths=None, wavelength_range=None,
-          roughness=None, binder_index=None, binder_index_prior=None, flakes=False, incidence_offset=False):
+          roughness=None, binder_index=None, binder_index_prior=None, flakes=False, incidence_offset=False,
+          censored_zeros=False):
     """Posterior of ``a`` and ``tau`` (and ``g``, ``eps``) per wavelength from a measurement set.
 
     Parameters
@@ -496,6 +503,15 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         predicted readings. Needs ``roughness="free"`` and ``noise_floor="infer"``. The Cornell
         paints' exact zeros lie almost all at 70-80 deg incidence (the Krylon blue: 1172 of 1218
         at 80 deg), the signature of such an offset.
+    censored_zeros : bool
+        Observed values of exactly 0 are readings the instrument clipped at 0 (*censored*):
+        their likelihood is the probability of a reading ``<= 0``, ``Phi(-m / sigma)``, not the
+        Gaussian density at 0 (:func:`bayespig.likelihood.censored_zero_logpdf`; the module
+        docstring of :mod:`bayespig.likelihood` says why the density is wrong for them). With
+        ``incidence_offset`` the offset is then subtracted from the reading's mean before the
+        clip (:class:`~bayespig.inference.roughness.NoiseFloorFilmLayout`). Needs a noise floor;
+        the attribute ``censored_zeros`` records it. Default False (the zeros as Gaussian
+        readings, as before).
 
     Returns
     -------
@@ -535,6 +551,7 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     priors, settings = check_priors(priors), check_settings(settings)
     substrate_sd = check_substrate_sd(substrate_sd)
     noise_floor = noise_floor_argument(noise_floor)
+    censored_zeros = censored_zeros_argument(censored_zeros, noise_floor)
     roughness = roughness_argument(roughness)
     binder_index = binder_index_argument(binder_index)
     if binder_index == "free" and roughness != "free":
@@ -597,7 +614,8 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         nominal = roughness
     return infer_problem(problem, seed=seed, g=g, eps=eps_value, executor=executor,
                          progress=progress, priors=priors, settings=settings, shared=shared,
-                         noise_floor=noise_floor, roughness=nominal, incidence_offset=incidence_offset)
+                         noise_floor=noise_floor, roughness=nominal, incidence_offset=incidence_offset,
+                         censored_zeros=censored_zeros)
 
 
 def _resolve_roughness(roughness, problem, g, eps, substrate_sd):

@@ -39,16 +39,16 @@ class _Task:
     seeds: tuple  # SeedSequence per index
     noise_floor: float | str | None = None  # additive floor: None, known, or "infer"
     roughness: float = 0.0  # GGX alpha of the films' surface (0: smooth, the smooth tables)
+    censored_zeros: bool = False  # observed zeros as readings censored at 0 (needs a floor)
 
 
 def _run_task(task):
     """Sample the wavelengths of one task, one stack in one sampler (runs in a worker process)."""
     tables = _WORKER_TABLES.setdefault((task.g, task.problem.n, task.roughness), {})
     model = ForwardModel(task.problem, g=task.g, tables=tables, roughness=task.roughness)
-    singles = [LogPosterior(model, index, task.priors, g=task.g, eps=task.eps, noise_floor=task.noise_floor)
-               for index in task.indices]
-    stacked = LogPosterior(model, list(task.indices), task.priors, g=task.g, eps=task.eps,
-                           noise_floor=task.noise_floor)
+    noise = {"noise_floor": task.noise_floor, "censored_zeros": task.censored_zeros}
+    singles = [LogPosterior(model, index, task.priors, g=task.g, eps=task.eps, **noise) for index in task.indices]
+    stacked = LogPosterior(model, list(task.indices), task.priors, g=task.g, eps=task.eps, **noise)
     runs = _sample_stack(stacked, singles, task.starts, task.settings, list(task.seeds))
     return [_wavelength_outputs(single, run, task.settings) for single, run in zip(singles, runs)]
 

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..likelihood import censored_zero_logpdf
 from .shared import FilmLayout, SharedParameter
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
@@ -369,11 +370,19 @@ class NoiseFloorFilmLayout(FilmLayout):
         Known relative error for films without their own [-].
     incidence_offset : bool
         Infer the incidence offset ``b`` per band.
+    censored_zeros : bool
+        The observed zeros are readings censored at 0 (:mod:`bayespig.likelihood`, "Censored
+        zeros"): the reading is ``max(x, 0)`` of ``x ~ N(mu, (eps f)^2 + sigma0^2)``, ``mu = f - b /
+        cos theta_i`` (``f`` without an offset), so a 0 has the likelihood ``Phi(-mu / sigma)`` and a
+        positive reading the density ``N(x_obs | mu, sigma^2)``; the multiplicative error scales the
+        paint's BRDF ``f``, not the offset. :meth:`predict` then gives ``mu`` (any sign) and
+        :meth:`reading` the predicted reading ``max(mu, 0)`` (the reading's median).
     """
 
-    def __init__(self, model, priors, eps, incidence_offset=False):
+    def __init__(self, model, priors, eps, incidence_offset=False, censored_zeros=False):
         super().__init__(model, priors, eps)
         self.incidence_offset = bool(incidence_offset)
+        self.censored_zeros = bool(censored_zeros)
         extra = ("log_noise_floor",) + (("log_incidence_offset",) if self.incidence_offset else ())
         self.names = self.names + extra
         n_wl = self.n_wavelengths
@@ -401,14 +410,21 @@ class NoiseFloorFilmLayout(FilmLayout):
 
     def predict(self, theta, inputs):
         """The predicted readings ``m`` from the blocks, (W, n_wl, n_values): the film's values,
-        less the incidence offset when it is inferred."""
+        less the incidence offset when it is inferred, clipped at 0 (with ``censored_zeros`` not
+        clipped: the mean ``mu`` of the reading before the instrument clips it)."""
         values = super().predict(theta[..., :self.film_size], inputs)
         offset = self.incidence_offset_of(theta)
         if offset is None:
             return values
         values -= offset[..., None] * self.offset_scale
-        np.maximum(values, 0.0, out=values)
+        if not self.censored_zeros:
+            np.maximum(values, 0.0, out=values)
         return values
+
+    def reading(self, values):
+        """The predicted readings from :meth:`predict`'s values: ``max(mu, 0)`` with
+        ``censored_zeros`` (already clipped without)."""
+        return np.maximum(values, 0.0) if self.censored_zeros else values
 
     def unpack(self, theta):
         """``a`` (W, n_wl) and ``tau`` (W, n_wl, G) (the floor: :meth:`noise_floor_of`)."""
@@ -435,6 +451,8 @@ class NoiseFloorFilmLayout(FilmLayout):
         ``hypot``, in place: this is half the joint run's time on 1439 geometries); the same
         density to round-off.
         """
+        if self.censored_zeros:
+            return self._censored_log_density(theta, values)
         floor = self.noise_floor_of(theta)[..., None]
         variance = np.multiply(values, self.eps)
         np.multiply(variance, variance, out=variance)
@@ -447,6 +465,19 @@ class NoiseFloorFilmLayout(FilmLayout):
         residual += _LOG_2PI
         residual *= -0.5
         return residual
+
+    def _censored_log_density(self, theta, mean):
+        """:meth:`log_density` with the observed zeros censored at 0: ``log Phi(-mu / sigma)`` for
+        them, ``log N(x_obs | mu, sigma^2)`` for the rest, ``sigma^2 = (eps f)^2 + sigma0^2``."""
+        floor = self.noise_floor_of(theta)[..., None]
+        offset = self.incidence_offset_of(theta)
+        paint = mean if offset is None else mean + offset[..., None] * self.offset_scale  # f
+        variance = np.square(paint * self.eps) + floor * floor
+        value = -0.5 * (np.square(self.observed - mean) / variance + np.log(variance) + _LOG_2PI)
+        zero = self.observed == 0  # (n_wl, n_values)
+        if zero.any():
+            value[..., zero] = censored_zero_logpdf(mean[..., zero], variance[..., zero])
+        return value
 
 
 def incidence_offset_scale(problem):

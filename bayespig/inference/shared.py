@@ -125,15 +125,15 @@ __all__ = [
     "ADAPTATION_CONTRACTION",
     "ADAPTATION_DRIFT",
     "ADAPTATION_STEPS",
-    "MAX_ADAPTATION_ROUNDS",
-    "adaptation_settled",
     "JOINT_DE_WEIGHT",
+    "MAX_ADAPTATION_ROUNDS",
     "SENSITIVITY_DAMPING",
     "BlockLayout",
     "BlockwiseMove",
     "FilmLayout",
     "JointLogPosterior",
     "SharedParameter",
+    "adaptation_settled",
     "pilot_draws",
     "sample_blocks",
     "sample_joint",
@@ -311,6 +311,12 @@ class BlockLayout(abc.ABC):
         """Physical values of the blocks (W, n_wavelengths, k) for :meth:`JointLogPosterior.unpack`
         (a tuple; default the blocks themselves)."""
         return (theta,)
+
+    def reading(self, values):
+        """The predicted readings from :meth:`predict`'s values (the same by default; a layout whose
+        :meth:`predict` gives the mean of a reading before the instrument clips it at 0 clips it
+        here)."""
+        return values
 
     def log_density(self, theta, values):
         """Pointwise log-likelihood (W, n_wavelengths, n_values) of the values predicted from the
@@ -538,7 +544,7 @@ class JointLogPosterior:
         # a prediction of exactly 0 (a reading clipped by the incidence offset) gives an infinite
         # residual and an undefined difference: such values carry no sensitivity (0 below)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            values = self._predict_theta(points[:, :-C], points[:, -C:])
+            values = self.layout.reading(self._predict_theta(points[:, :-C], points[:, -C:]))
             residual = (self.observed / values - 1.0) / self.eps
             derivative = (residual[:base.size] - residual[base.size:]) / (2.0 * step)  # (n_dim, n_wl, n_values)
         derivative = np.nan_to_num(derivative, nan=0.0, posinf=0.0, neginf=0.0)
@@ -600,9 +606,9 @@ class JointLogPosterior:
         return ((theta >= self.theta_lower) & (theta <= self.theta_upper)).all(axis=1) & self._shared_inside(phi)
 
     def predict(self, u):
-        """Predicted values of every wavelength, shape (W, n_wavelengths, n_values)."""
+        """Predicted values (readings) of every wavelength, shape (W, n_wavelengths, n_values)."""
         theta, phi = self.theta_of(u)
-        return self._predict_theta(theta, phi)
+        return self.layout.reading(self._predict_theta(theta, phi))
 
     def log_likelihood(self, u):
         """Pointwise log-likelihood of eq. (7), shape (W, n_wavelengths, n_values)."""
@@ -979,6 +985,7 @@ def sample_joint(model, specs, draws, priors, eps, settings, joint_seed, start_s
         noisy = model_values * (1.0 + joint.eps * rng.standard_normal(model_values.shape))
         if floor is not None:
             noisy = noisy + floor[..., None] * rng.standard_normal(model_values.shape)
+        noisy = joint.layout.reading(noisy)  # an instrument that clips at 0 clips the noisy reading
     shape = (n_chains, n_draws)
     autocorr = run["autocorr_time"]
     block_index = joint.layout.flat_index  # (n_wl, k): each wavelength's coordinates in the flat vector

@@ -66,9 +66,19 @@ def test_noise_floor_and_selection_reach_the_posterior(tmp_path):
     _write(data, zero=True)
     out = tmp_path / "out"
     assert main(["infer", str(data), "--out", str(out), "--no-progress", "--method", "4", "--noise-floor", "0.001",
-                 "--wavelengths", "540-600", "--exclude-mirror", "20", "--max-angle", "80"]) == 0
+                 "--wavelengths", "540-600", "--exclude-mirror", "20", "--max-angle", "80", "--censored-zeros"]) == 0
     idata = load_inference(out / "posterior.nc")
     np.testing.assert_array_equal(idata.posterior["wavelength"].values, [550.0, 600.0])
     assert idata.posterior.attrs["noise_floor_mode"] == "known"
     assert idata.posterior.attrs["noise_floor"] == 0.001
+    assert idata.posterior.attrs["censored_zeros"] == 1
     assert "45as15" not in set(idata.observed_data["channel"].values)  # 15° from the mirror
+
+
+def test_censored_zeros_need_a_noise_floor(tmp_path, capsys):
+    data = tmp_path / "film.csv"
+    _write(data, zero=True)
+    assert main(["infer", str(data), "--out", str(tmp_path / "out"), "--no-progress", "--censored-zeros"]) == 2
+    assert capsys.readouterr().err == ("bayespig: error: --censored-zeros needs --noise-floor (a number > 0 or "
+                                       "infer): without a floor a reading of 0 has no probability\n")
+    assert not (tmp_path / "out").exists()
