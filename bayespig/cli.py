@@ -163,7 +163,12 @@ def _check_notes(measurements, verbose=False):
         :func:`~bayespig.likelihood.check_observed`, without a noise floor); the lines.
     """
     from .likelihood import Problem, check_observed
-    from .selection import mirror_distance_deg
+    from .selection import (
+        OCCLUSION_RADIUS_DEG,
+        OCCLUSION_RATIO,
+        mirror_distance_deg,
+        occluded_geometries,
+    )
 
     wavelength = np.asarray(measurements.wavelength_nm, dtype=float)
     lines = []
@@ -189,6 +194,16 @@ def _check_notes(measurements, verbose=False):
                          f"Lambertian surface gives 0.32 1/sr): gloss; the largest {values[k, band]:.3g} "
                          f"1/sr at {wavelength[band]:g} nm, {brdf[k].label} "
                          f"({_rows_text([brdf[i].source for i in np.unique(high[:, 0])], verbose)})")
+    occluded = occluded_geometries(measurements)
+    if occluded:
+        rows = [m for name, ks in occluded.items() for m in (measurements.sample(name).measurements[k] for k in ks)]
+        brightest = max(float(np.max(m.values)) for m in rows)
+        lines.append(f"  {len(rows)} BRDF geometr{'ies' if len(rows) > 1 else 'y'} read at most {brightest:.2g} 1/sr in "
+                     f"every band, below {OCCLUSION_RATIO:g} of their neighbours' (same incidence, viewing within "
+                     f"{OCCLUSION_RADIUS_DEG:g}°): blocked readings, not the paint "
+                     f"({', '.join(m.label for m in rows[:CHECK_ROWS_SHOWN])}"
+                     f"{', ...' if len(rows) > CHECK_ROWS_SHOWN else ''}); --exclude-occluded leaves them out "
+                     f"({_rows_text([m.source for m in rows], verbose)})")
     reflectance = [m for s in measurements.samples for m in s.measurements]
     zeros = np.array([m.values == 0 for m in reflectance])
     if zeros.any():

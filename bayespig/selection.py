@@ -29,13 +29,20 @@ import numpy as np
 
 from .data.model import MeasurementSet
 
-__all__ = ["DIRECTIONAL_KINDS", "WAVELENGTH_MATCH_NM", "mirror_distance_deg", "select_measurements"]
+__all__ = ["DIRECTIONAL_KINDS", "OCCLUSION_RADIUS_DEG", "OCCLUSION_RATIO", "WAVELENGTH_MATCH_NM",
+           "mirror_distance_deg", "occluded_geometries", "select_measurements"]
 
 #: Measurement kinds with one viewing direction (the mirror cone applies to them; the
 #: hemispherical ones integrate over all viewing directions, a transmittance has none).
 DIRECTIONAL_KINDS = ("brdf", "reflectance_factor")
 #: A wavelength asked for matches a measured one within this [nm].
 WAVELENGTH_MATCH_NM = 1e-6
+#: :func:`occluded_geometries`: the neighbours of a geometry are the film's geometries at the same
+#: incidence whose viewing direction lies within this angle of its own [deg] ...
+OCCLUSION_RADIUS_DEG = 15.0
+#: ... and it is occluded when its brightest band is below this fraction of the median of its
+#: neighbours' brightest bands (50 times darker than its surroundings at every wavelength) [-].
+OCCLUSION_RATIO = 0.02
 
 
 def mirror_distance_deg(theta_i, theta_o, delta_phi):
@@ -108,17 +115,85 @@ def _wavelength_mask(measured, wavelengths, wavelength_range):
     return keep
 
 
-def _describe(exclude_mirror_deg, max_angle_deg):
+def _viewing_directions(theta_o, delta_phi):
+    """Unit viewing vectors (n, 3) (the module docstring's ``v``)."""
+    theta, phi = np.radians(theta_o), np.radians(delta_phi)
+    return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], axis=-1)
+
+
+def occluded_geometries(measurements, *, radius_deg=OCCLUSION_RADIUS_DEG, ratio=OCCLUSION_RATIO):
+    """The BRDF geometries of each film that read (nearly) nothing where their surroundings are bright.
+
+    A gonioreflectometer's reading can be blocked (the detector or sample holder in the beam, a
+    shadowed sample edge at grazing angles): it is then near 0 in *every* band, while the paint's
+    BRDF varies smoothly with the direction. A geometry is flagged when even its brightest band
+    is below ``ratio`` times the median of its neighbours' brightest bands (the neighbours: the
+    film's BRDF geometries at the same ``theta_i`` whose viewing direction lies within
+    ``radius_deg`` of its own, itself excluded; at least two): darker than its surroundings at
+    every wavelength, where a dark band of the paint (a red's blue end) is dark for all of
+    them and tells nothing. No model enters: a screen for readings that are not the paint, to be looked at
+    (``bayespig check`` lists them) and excluded on purpose (``select_measurements(...,
+    exclude_occluded=True)``). On the Cornell paints it flags the three geometries theta_i = 80°,
+    theta_o = 79°, delta_phi = 160-170° (10-20° from the mirror, inside the grazing gloss lobe) that
+    read below 0.002 1/sr in all 31 bands of both paints, next to neighbours of 0.05-5.7 1/sr.
+
+    Parameters
+    ----------
+    measurements : MeasurementSet
+    radius_deg : float
+        Neighbourhood of a viewing direction [deg], in (0, 180].
+    ratio : float
+        Darkness asked in every band, relative to the neighbours' median [-], in (0, 1).
+
+    Returns
+    -------
+    dict
+        Film sample name -> indices into its ``measurements`` (ascending; films without such
+        geometries are left out).
+    """
+    if not isinstance(measurements, MeasurementSet):
+        raise TypeError(f"measurements must be a MeasurementSet, got {type(measurements).__name__}")
+    radius_deg = _angle_argument("radius_deg", radius_deg, 0.0, 180.0)
+    if not (isinstance(ratio, numbers.Real) and 0.0 < ratio < 1.0):
+        raise ValueError(f"ratio must be a number in (0, 1), got {ratio!r}")
+    cos_radius = np.cos(np.radians(radius_deg))
+    found = {}
+    for sample in measurements.samples:
+        if sample.role not in ("film", "film_on_glass"):
+            continue
+        index = np.array([k for k, m in enumerate(sample.measurements) if m.kind == "brdf"], dtype=int)
+        if index.size < 3:
+            continue
+        rows = [sample.measurements[k] for k in index]
+        theta_i = np.array([m.theta_i for m in rows])
+        view = _viewing_directions(np.array([m.theta_o for m in rows]), np.array([m.delta_phi for m in rows]))
+        peak = np.array([m.values for m in rows], dtype=float).max(axis=1)  # each geometry's brightest band
+        flagged = []
+        for j in range(index.size):
+            near = (theta_i == theta_i[j]) & (view @ view[j] >= cos_radius)
+            near[j] = False
+            if near.sum() < 2:
+                continue
+            if peak[j] < ratio * np.median(peak[near]):
+                flagged.append(int(index[j]))
+        if flagged:
+            found[sample.name] = flagged
+    return found
+
+
+def _describe(exclude_mirror_deg, max_angle_deg, exclude_occluded=False):
     parts = []
     if exclude_mirror_deg is not None:
         parts.append(f"the mirror cone of {exclude_mirror_deg:g}°")
     if max_angle_deg is not None:
         parts.append(f"max angle {max_angle_deg:g}°")
+    if exclude_occluded:
+        parts.append("the occluded geometries")
     return " and ".join(parts)
 
 
 def select_measurements(measurements, *, exclude_mirror_deg=None, max_angle_deg=None, wavelengths=None,
-                        wavelength_range=None):
+                        wavelength_range=None, exclude_occluded=False):
     """A new measurement set without the geometries near the mirror or at grazing angles, and
     with some bands only.
 
@@ -139,6 +214,10 @@ def select_measurements(measurements, *, exclude_mirror_deg=None, max_angle_deg=
         Keep these bands only; each must be measured (within :data:`WAVELENGTH_MATCH_NM`) [nm].
     wavelength_range : (float, float), optional
         Keep the bands in ``[low, high]`` only [nm].
+    exclude_occluded : bool
+        Drop the films' BRDF geometries that :func:`occluded_geometries` flags (readings near 0
+        in every band amid bright neighbours: blocked, not the paint), found on all bands
+        before the band selection.
 
     Returns
     -------
@@ -159,12 +238,21 @@ def select_measurements(measurements, *, exclude_mirror_deg=None, max_angle_deg=
     max_angle_deg = _angle_argument("max_angle_deg", max_angle_deg, 0.0, 90.0)
     measured = np.asarray(measurements.wavelength_nm, dtype=float)
     bands = _wavelength_mask(measured, wavelengths, wavelength_range)
-    if exclude_mirror_deg is None and max_angle_deg is None and bands.all():
+    if not isinstance(exclude_occluded, (bool, np.bool_)):
+        raise TypeError(f"exclude_occluded must be True or False, got {type(exclude_occluded).__name__} "
+                        f"{exclude_occluded!r}")
+    if exclude_mirror_deg is None and max_angle_deg is None and bands.all() and not exclude_occluded:
         return measurements
+    occluded = occluded_geometries(measurements) if exclude_occluded else {}
+    dropped_labels = {}  # film -> labels of its occluded geometries dropped
     samples = []
     for sample in measurements.samples:
         kept = []
-        for m in sample.measurements:
+        dropped = set(occluded.get(sample.name, ()))
+        for k, m in enumerate(sample.measurements):
+            if k in dropped:
+                dropped_labels.setdefault(sample.name, []).append(m.label)
+                continue
             if sample.role in ("film", "film_on_glass"):
                 if max_angle_deg is not None and max(m.theta_i, m.theta_o) > max_angle_deg:
                     continue
@@ -173,14 +261,16 @@ def select_measurements(measurements, *, exclude_mirror_deg=None, max_angle_deg=
                     continue
             kept.append(m if bands.all() else dataclasses.replace(m, values=np.asarray(m.values)[bands]))
         if not kept:
-            verb = "leaves" if (exclude_mirror_deg is None) != (max_angle_deg is None) else "leave"
-            raise ValueError(f"{_describe(exclude_mirror_deg, max_angle_deg)} {verb} no geometry of "
+            verb = "leaves" if (exclude_mirror_deg is not None) + (max_angle_deg is not None) + bool(
+                exclude_occluded) == 1 else "leave"
+            raise ValueError(f"{_describe(exclude_mirror_deg, max_angle_deg, exclude_occluded)} {verb} no geometry of "
                              f"film {sample.name!r} (it has {len(sample.measurements)}: "
                              f"{', '.join(m.label for m in sample.measurements[:6])}"
                              f"{', ...' if len(sample.measurements) > 6 else ''})")
         samples.append(dataclasses.replace(sample, measurements=tuple(kept)))
     metadata = dict(measurements.metadata)
     metadata["selection"] = {"exclude_mirror_deg": exclude_mirror_deg, "max_angle_deg": max_angle_deg,
-                             "wavelength_nm": [float(w) for w in measured[bands]]}
+                             "wavelength_nm": [float(w) for w in measured[bands]],
+                             "occluded": dropped_labels}
     return MeasurementSet(measured[bands], samples, n=measurements.n, metadata=metadata,
                           source=measurements.source)

@@ -22,14 +22,14 @@ import numpy as np
 from bayespig.data import read_measurements
 from bayespig.inference import infer
 from bayespig.selection import select_measurements
-from bayespig.studies.cornell import EPS, MIRROR_CUT_DEG, CornellSettings, default_cornell_path
+from bayespig.studies.cornell import EPS, MIRROR_CUT_DEG, CornellStudySettings, default_cornell_path
 
 sys.path.insert(0, "benchmarks")
 from _common import machine_line
 
 paints = (sys.argv[1] if len(sys.argv) > 1 else "krylon_blue,garnet_red").split(",")
 bands = [float(b) for b in (sys.argv[2] if len(sys.argv) > 2 else "420,450,600").split(",")]
-study = CornellSettings()
+study = CornellStudySettings()
 print(machine_line())
 for paint in paints:
     ms = select_measurements(read_measurements(default_cornell_path() / f"{paint}.astm", opaque=True),

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from bayespig.data import Measurement, MeasurementSet, Sample
-from bayespig.selection import mirror_distance_deg, select_measurements
+from bayespig.selection import mirror_distance_deg, occluded_geometries, select_measurements
 
 #: Two computations of the same angle (atan2 of the cross and dot products vs arccos of an
 #: explicitly rotated dot product): rounding, amplified by arccos near 0 and 180 degrees.
@@ -59,7 +59,7 @@ def test_mirror_cone_and_max_angle_drop_the_right_geometries():
     kept = select_measurements(ms, max_angle_deg=60.0)
     assert [m.label for m in kept.films[0].measurements] == ["45/45/179", "45as5", "45as25", "45as45", "45/45/90"]
     assert kept.metadata["selection"] == {"exclude_mirror_deg": None, "max_angle_deg": 60.0,
-                                          "wavelength_nm": [450.0, 500.0, 550.0]}
+                                          "wavelength_nm": [450.0, 500.0, 550.0], "occluded": {}}
 
 
 def test_bands_by_list_and_range():
@@ -109,3 +109,41 @@ def test_selection_type_errors():
         select_measurements(_gonio_set(), wavelength_range=450.0)
     assert str(caught.value) == ("wavelength_range must be None or a pair (low, high) of wavelengths [nm], "
                                  "got 450.0")
+
+
+def _ring_set(dark):
+    """A film at theta_i = 45°: viewing directions theta_o = 40° every 10° of azimuth 0-180° (6.4° apart:
+    neighbours within 15° two either side) and one at theta_i = 20° alone; the readings of ``dark`` (azimuth ->
+    values) replace the smooth ones (0.05-0.2 1/sr)."""
+    measurements = []
+    for phi in range(0, 181, 10):
+        values = dark.get(phi, [0.05 + 0.1 * (1 + np.cos(np.radians(phi))) / 2 * k for k in (1.0, 1.5, 2.0)])
+        measurements.append(Measurement.from_geometry("brdf", f"45/40/{phi}", values))
+    measurements.append(Measurement.from_geometry("brdf", "20/40/0", [1e-4, 1e-4, 1e-4]))
+    film = Sample("ring", "film", tuple(measurements), opaque=True)
+    return MeasurementSet([450.0, 500.0, 550.0], [film])
+
+
+def test_occluded_geometries_are_dark_in_every_band_amid_bright_neighbours():
+    # 90°: below 2 % of its neighbours in every band (flagged); 180°: dark at 450 and 500 nm only, its
+    # brightest band as bright as its neighbours' (kept: a paint's dark band); 130°: 3-4 % of its
+    # neighbours (kept: the ratio is 2 %); 20/40/0: no neighbour at its incidence (never flagged)
+    ms = _ring_set({90: [1e-3, 1e-3, 1e-3], 180: [1e-4, 1e-4, 0.15], 130: [3e-3, 3e-3, 3e-3]})
+    assert occluded_geometries(ms) == {"ring": [9]}
+    kept = select_measurements(ms, exclude_occluded=True)
+    assert "45/40/90" not in [m.label for m in kept.films[0].measurements]
+    assert len(kept.films[0].measurements) == len(ms.films[0].measurements) - 1
+    assert kept.metadata["selection"]["occluded"] == {"ring": ["45/40/90"]}
+    assert occluded_geometries(ms, ratio=0.05) == {"ring": [9, 13]}
+    assert occluded_geometries(_ring_set({})) == {}
+
+
+def test_occluded_geometries_arguments():
+    with pytest.raises(ValueError) as caught:
+        occluded_geometries(_ring_set({}), ratio=1.5)
+    assert str(caught.value) == "ratio must be a number in (0, 1), got 1.5"
+    with pytest.raises(TypeError) as caught:
+        select_measurements(_ring_set({}), exclude_occluded="yes")
+    assert str(caught.value) == "exclude_occluded must be True or False, got str 'yes'"
+    with pytest.raises(TypeError):
+        occluded_geometries([1, 2])

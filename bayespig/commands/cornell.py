@@ -45,6 +45,9 @@ def add_cornell_parser(subparsers):
     parser.add_argument("--no-incidence-offset", action="store_true",
                         help="no instrument offset b / cos(theta_i) per band (default: inferred in every rough "
                              "fit; the paints' exact zeros lie at 70-80 deg incidence)")
+    parser.add_argument("--keep-occluded", action="store_true",
+                        help="keep the geometries that read (nearly) nothing in every band amid bright neighbours "
+                             "(default: left out; bayespig check lists them)")
     parser.add_argument("--jobs", type=int, default=1,
                         help="paints fitted at once, one process each (default 1; the results do not depend "
                              "on it)")
@@ -82,7 +85,8 @@ def run_cornell(args):
     if args.jobs < 1:
         raise ValueError(f"--jobs must be a positive integer, got {args.jobs}")
     settings = CornellStudySettings(seed=args.seed, binder_index=None if args.fixed_binder_index else "free",
-                                    flakes=not args.no_flakes, incidence_offset=not args.no_incidence_offset)
+                                    flakes=not args.no_flakes, incidence_offset=not args.no_incidence_offset,
+                                    exclude_occluded=not args.keep_occluded)
     overrides = {k: v for k, v in (("max_steps", args.max_steps), ("draws_per_chain", args.draws_per_chain))
                  if v is not None}
     if overrides:

@@ -78,6 +78,9 @@ def add_infer_parser(subparsers):
     parser.add_argument("--censored-zeros", action="store_true",
                         help="the observed zeros are readings the instrument clipped at 0: their likelihood "
                              "is P(reading <= 0), not the Gaussian density at 0; needs --noise-floor")
+    parser.add_argument("--exclude-occluded", action="store_true",
+                        help="drop the films' BRDF geometries that read (nearly) nothing in every band amid bright "
+                             "neighbours (blocked readings; bayespig check lists them)")
     parser.add_argument("--exclude-mirror", type=float, default=None, metavar="DEG",
                         help="drop the films' geometries within DEG degrees of the mirror direction")
     parser.add_argument("--max-angle", type=float, default=None, metavar="DEG",
@@ -205,7 +208,7 @@ def run_infer(args):
                       g=args.g, eps=eps, progress=not args.no_progress, settings=settings,
                       substrate_sd=args.substrate_sd, noise_floor=noise_floor, roughness=roughness,
                       binder_index=binder_index, flakes=args.flakes, incidence_offset=args.incidence_offset,
-                      censored_zeros=args.censored_zeros, exclude_mirror_deg=args.exclude_mirror,
+                      censored_zeros=args.censored_zeros, exclude_mirror_deg=args.exclude_mirror, exclude_occluded=args.exclude_occluded,
                       max_angle_deg=args.max_angle,
                       wavelengths=wavelengths, wavelength_range=wavelength_range)
         flagged = diagnose(idata, warn=False)

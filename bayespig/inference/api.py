@@ -398,7 +398,7 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
 
 def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, executor=None,
           progress=True, priors=None, settings=None, substrate_sd=None, noise_floor=None,
-          exclude_mirror_deg=None, max_angle_deg=None, wavelengths=None, wavelength_range=None,
+          exclude_mirror_deg=None, max_angle_deg=None, wavelengths=None, wavelength_range=None, exclude_occluded=False,
           roughness=None, binder_index=None, binder_index_prior=None, flakes=False, incidence_offset=False,
           censored_zeros=False):
     """Posterior of ``a`` and ``tau`` (and ``g``, ``eps``) per wavelength from a measurement set.
@@ -455,6 +455,10 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         Fit these measured bands only [nm].
     wavelength_range : (float, float), optional
         Fit the bands in ``[low, high]`` only [nm].
+    exclude_occluded : bool
+        Drop the films' BRDF geometries that read (nearly) nothing in every band amid bright
+        neighbours (:func:`bayespig.selection.occluded_geometries`: blocked readings, not the
+        paint).
     roughness : {"free"} or float, optional
         GGX roughness ``alpha`` of the films' top surface (one surface for every film of the
         set; :mod:`bayespig.physics.rough_surface`). ``"free"``: inferred jointly with every
@@ -582,7 +586,7 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
         raise ValueError(f"roughness='free' needs noise_floor None or 'infer' (the joint run over all wavelengths "
                          f"infers one floor per band or has none), got {noise_floor!r}")
     selection = {"exclude_mirror_deg": exclude_mirror_deg, "max_angle_deg": max_angle_deg,
-                     "wavelengths": wavelengths, "wavelength_range": wavelength_range}
+                 "wavelengths": wavelengths, "wavelength_range": wavelength_range, "exclude_occluded": exclude_occluded}
     check_selection(**selection)
     if not isinstance(measurements, MeasurementSet):
         if isinstance(measurements, (str, os.PathLike)):

@@ -140,14 +140,16 @@ def check_substrate_sd(substrate_sd):
     return float(substrate_sd)
 
 
-def check_selection(*, exclude_mirror_deg=None, max_angle_deg=None, wavelengths=None, wavelength_range=None):
+def check_selection(*, exclude_mirror_deg=None, max_angle_deg=None, wavelengths=None, wavelength_range=None,
+                    exclude_occluded=False):
     """The selection arguments of :func:`bayespig.infer` checked without a measurement set:
-    the angles (None or degrees in [0, 180] and [0, 90]), ``wavelengths`` a non-empty sequence
+    the angles (None or degrees in [0, 180] and [0, 90]), ``exclude_occluded`` a flag, ``wavelengths`` a non-empty sequence
     of numbers, ``wavelength_range`` a pair ``(low, high)`` with ``low <= high``.
 
     What needs the set (a wavelength that is not measured, a selection that leaves nothing) is
     checked by :func:`bayespig.selection.select_measurements`.
     """
+    check_flag("exclude_occluded", exclude_occluded)
     for name, value, high in (("exclude_mirror_deg", exclude_mirror_deg, 180.0),
                               ("max_angle_deg", max_angle_deg, 90.0)):
         if value is None:

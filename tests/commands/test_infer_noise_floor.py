@@ -82,3 +82,28 @@ def test_censored_zeros_need_a_noise_floor(tmp_path, capsys):
     assert capsys.readouterr().err == ("bayespig: error: --censored-zeros needs --noise-floor (a number > 0 or "
                                        "infer): without a floor a reading of 0 has no probability\n")
     assert not (tmp_path / "out").exists()
+
+
+def test_exclude_occluded_reaches_infer(tmp_path, monkeypatch):
+    import bayespig.inference
+
+    data = tmp_path / "film.csv"
+    _write(data)
+    passed = {}
+
+    def recorded_infer(measurements, **kwargs):
+        passed.update(kwargs)
+        raise KeyboardInterrupt  # stop here: the wiring is what is tested
+
+    monkeypatch.setattr(bayespig.inference, "infer", recorded_infer)
+    assert main(["infer", str(data), "--out", str(tmp_path / "out"), "--no-progress", "--exclude-occluded"]) != 0
+    assert passed["exclude_occluded"] is True
+    assert not (tmp_path / "out").exists()
+
+
+def test_exclude_occluded_must_be_a_flag():
+    from bayespig.inference import infer
+
+    with pytest.raises(TypeError) as caught:
+        infer("never-read.csv", exclude_occluded="yes")
+    assert str(caught.value) == "exclude_occluded must be True or False, got str 'yes'"

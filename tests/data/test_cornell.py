@@ -191,3 +191,23 @@ def test_check_verbose_lists_every_geometry(tmp_path, capsys, monkeypatch):
     lines = capsys.readouterr().out.splitlines()
     assert [line for line in lines if line.startswith("    brdf ")] == [
         "    brdf 45as15", "    brdf 45as-0.3", "    brdf 30/60/90"]
+
+
+@needs_cornell
+def test_cornell_occluded_geometries_are_the_three_grazing_rows_of_both_files(capsys):
+    # theta_i = 80°, theta_o = 79°, delta_phi = 160-170°: 10-20° from the mirror, inside the grazing gloss
+    # lobe, and dark at every band in both paints (the neighbours read 0.05-5.7 1/sr)
+    from bayespig.selection import occluded_geometries
+
+    for path in sorted(CORNELL.glob("*.astm")):
+        ms = read_measurements(path, opaque=True)
+        found = occluded_geometries(ms)
+        film = ms.films[0]
+        labels = [film.measurements[k].label for k in found[film.name]]
+        assert labels == ["80/79.0472/160", "80/79.0472/165", "80/79.0472/170"], path
+        assert max(float(film.measurements[k].values.max()) for k in found[film.name]) < 2e-3
+    assert main(["check", str(GARNET), "--opaque"]) == 1
+    line = next(line for line in capsys.readouterr().out.splitlines() if "blocked readings" in line)
+    assert line == ("  3 BRDF geometries read at most 0.0012 1/sr in every band, below 0.02 of their neighbours' "
+                    "(same incidence, viewing within 15°): blocked readings, not the paint (80/79.0472/160, "
+                    "80/79.0472/165, 80/79.0472/170); --exclude-occluded leaves them out (rows 1458, 1459, 1460)")

@@ -19,6 +19,7 @@ from bayespig.studies.cornell import (
     default_cornell_path,
     interval_overlap,
     mirror_band_subset,
+    study_sets,
     write_cornell_report,
 )
 
@@ -153,3 +154,17 @@ def test_the_report_gives_the_flakes_and_the_fit_without_them(tiny_study, tmp_pa
 def test_bad_jobs_are_refused(jobs):
     with pytest.raises(ValueError, match=f"jobs must be a positive integer, got {jobs!r}"):
         cornell_study(CORNELL, settings=TINY, jobs=jobs)
+
+
+@needs_cornell
+def test_every_fit_leaves_out_the_occluded_geometries():
+    ms = read_measurements(CORNELL / "krylon_blue.astm", opaque=True)
+    occluded, full, far, near = study_sets(ms, CornellStudySettings())
+    assert occluded == ["80/79.0472/160", "80/79.0472/165", "80/79.0472/170"]
+    labels = {m.label for m in full.films[0].measurements}
+    assert not labels & set(occluded)
+    kept_all = study_sets(ms, CornellStudySettings(exclude_occluded=False))
+    assert kept_all[0] == [] and len(kept_all[1].films[0].measurements) == len(full.films[0].measurements) + 3
+    # the subsets (theta <= 60°) never held them
+    assert len(kept_all[2].films[0].measurements) == len(far.films[0].measurements)
+    assert len(kept_all[3].films[0].measurements) == len(near.films[0].measurements)
