@@ -25,6 +25,7 @@ from .test_incidence_offset import (
     INSTRUMENT,
     OFFSET_TRUE,
     WAVELENGTHS,
+    _readings,
 )
 
 pytestmark = pytest.mark.usefixtures("private_table_cache")
@@ -33,26 +34,10 @@ pytestmark = pytest.mark.usefixtures("private_table_cache")
 CLIPPING_OFFSET = np.array([0.005, 0.002])
 
 
-def _clipped_readings(*, a, tau, g, r_s):
-    """The direct solver's BRDF less CLIPPING_OFFSET / cos theta_i, plus additive noise FLOOR_TRUE (seeded),
-    clipped at 0 (simulate adds the relative error)."""
-    rng = np.random.default_rng(101)
-    channels = INSTRUMENT.channels
-    theta_i = np.array([c.theta_i for c in channels])
-    a = np.asarray(a, dtype=float)
-    out = np.empty(a.shape + (len(channels),))
-    for index in np.ndindex(a.shape):
-        f = brdf(theta_i, [c.theta_o for c in channels], [c.delta_phi for c in channels], a=float(a[index]),
-                 tau=np.inf, roughness=ALPHA_TRUE)
-        noise = FLOOR_TRUE * rng.standard_normal(f.shape)
-        out[index] = np.maximum(f - CLIPPING_OFFSET[index[-1]] / np.cos(np.radians(theta_i)) + noise, 0.0)
-    return out
-
-
 @pytest.fixture(scope="module")
 def clipped_set():
     return simulate(a=A_TRUE, tau=1.0, design=[FilmSpec("paint", opaque=True)], instrument=INSTRUMENT,
-                    wavelengths=WAVELENGTHS, eps=EPS_TRUE, seed=1, model=_clipped_readings)
+                    wavelengths=WAVELENGTHS, eps=EPS_TRUE, seed=1, model=lambda **kw: _readings(**kw, offset=CLIPPING_OFFSET))
 
 
 def test_censored_joint_run_stores_the_censored_terms_of_the_zeros(clipped_set):

@@ -45,8 +45,8 @@ GEOMETRIES = [(10.0, 30.0, 0.0), (10.0, 50.0, 90.0), (30.0, 26.0, 180.0), (30.0,
 INSTRUMENT = get_instrument(GEOMETRIES)
 
 
-def _readings(*, a, tau, g, r_s):
-    """Every channel's reading: the direct solver's BRDF less OFFSET_TRUE / cos theta_i, plus additive noise
+def _readings(*, a, tau, g, r_s, offset=OFFSET_TRUE):
+    """Every channel's reading: the direct solver's BRDF less ``offset / cos theta_i``, plus additive noise
     of sd FLOOR_TRUE (seeded), clipped at 0 (simulate adds the relative error)."""
     rng = np.random.default_rng(101)
     channels = INSTRUMENT.channels
@@ -58,7 +58,7 @@ def _readings(*, a, tau, g, r_s):
                  tau=np.inf, roughness=ALPHA_TRUE)
         band = index[-1]
         noise = FLOOR_TRUE * rng.standard_normal(f.shape)
-        out[index] = np.maximum(f - OFFSET_TRUE[band] / np.cos(np.radians(theta_i)) + noise, 0.0)
+        out[index] = np.maximum(f - offset[band] / np.cos(np.radians(theta_i)) + noise, 0.0)
     return out
 
 
