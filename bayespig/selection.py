@@ -143,7 +143,8 @@ def occluded_geometries(measurements, *, radius_deg=OCCLUSION_RADIUS_DEG, ratio=
     radius_deg : float
         Neighbourhood of a viewing direction [deg], in (0, 180].
     ratio : float
-        Darkness asked in every band, relative to the neighbours' median [-], in (0, 1).
+        How dark a geometry's brightest band must be, relative to the median of its neighbours'
+        brightest bands [-], in (0, 1).
 
     Returns
     -------

@@ -264,7 +264,7 @@ def _inference_data(problem, model, results, settings, log_post0, fit, *, seed, 
             float("nan") if floor_mode == "inferred" else 0.0),
         "noise_floor_units": noise_floor_units(problem),
         # observed zeros as readings censored at 0 (log Phi(-m / sigma)) or as Gaussian readings
-        "censored_zeros": int(getattr(log_post0, "censored_zeros", False)),
+        "censored_zeros": int(log_post0.censored_zeros),
         "settings": settings.to_json(log_post0.n_dim),
         "priors": json.dumps(priors.describe(), sort_keys=True),
         "table_keys": json.dumps(list(model.table_keys)),
