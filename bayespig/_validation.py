@@ -1,7 +1,7 @@
 """Argument checks for the public API, and random validation points over the tables' domain.
 
 Argument checks (:func:`real_scalar`, :func:`real_array`, :func:`integer`, :func:`seed`,
-:func:`choice`, :func:`broadcast`) turn a wrong type or value into one ``TypeError`` or
+:func:`choice`, :func:`flag`, :func:`broadcast`) turn a wrong type or value into one ``TypeError`` or
 ``ValueError`` that names the argument, instead of numpy's internal text. They import nothing
 of bayespig, so every layer (physics, tables, inference) can use them.
 
@@ -20,7 +20,7 @@ import operator
 
 import numpy as np
 
-__all__ = ["broadcast", "choice", "domain_points", "integer", "mixture", "real_array", "real_scalar", "seed"]
+__all__ = ["broadcast", "choice", "domain_points", "flag", "integer", "mixture", "real_array", "real_scalar", "seed"]
 
 #: The default tables' first finite tau node, ``2^TableSettings.log2_tau_min`` [-] (not imported
 #: from :mod:`bayespig.table`, which uses these checks; tests/test_table.py checks they agree).
@@ -218,6 +218,19 @@ def seed(value, name="seed"):
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
         raise TypeError(f"{name} must be None or an integer >= 0, got {_describe(value)}")
     return integer(name, value, low=0)
+
+
+def flag(name, value):
+    """A bool argument (``True``/``False``, numpy's bools too) as ``bool``, else a ``TypeError``
+    naming ``name`` (``1`` or ``"yes"`` are refused: a flag is not a number or a word).
+
+    Returns
+    -------
+    bool
+    """
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {_describe(value)}")
+    return bool(value)
 
 
 def choice(name, value, options):

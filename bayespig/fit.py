@@ -49,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validation import choice, integer, real_array, real_scalar
+from ._validation import choice, flag, integer, real_array, real_scalar
 from .instruments import get_instrument
 from .likelihood import FilmTerm, Problem
 from .physics.forward import specular_transmittance
@@ -1016,8 +1016,7 @@ def fit_problem(problem, *, g=0.0, tables=None, settings=None, warn=True):
         raise TypeError(
             f"problem must be a bayespig.likelihood.Problem, got {type(problem).__name__}"
         )
-    if not isinstance(warn, (bool, np.bool_)):
-        raise TypeError(f"warn must be True or False, got {warn!r} ({type(warn).__name__})")
+    flag("warn", warn)
     result = fit_batch(
         problem.films,
         problem.groups,

@@ -52,7 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import log_ndtr
 
-from ._validation import broadcast, real_array
+from ._validation import broadcast, flag, real_array
 from .instruments import Instrument
 from .physics.forward import specular_transmittance, surface_roughness
 from .rough_table import FixedRoughnessTable, load_binder_index_tables, load_rough_table
@@ -216,12 +216,11 @@ def censored_zeros_argument(censored_zeros, noise_floor, name="censored_zeros"):
     TypeError, ValueError
         Naming ``name``.
     """
-    if not isinstance(censored_zeros, (bool, np.bool_)):
-        raise TypeError(f"{name} must be True or False, got {type(censored_zeros).__name__} {censored_zeros!r}")
+    censored_zeros = flag(name, censored_zeros)
     if censored_zeros and noise_floor is None:
         raise ValueError(f"{name}=True needs a noise floor (noise_floor a number > 0 or 'infer'): without one "
                          "eq. (7) gives a reading of 0 no probability")
-    return bool(censored_zeros)
+    return censored_zeros
 
 
 def noise_floor_argument(noise_floor, name="noise_floor"):

@@ -27,6 +27,7 @@ import numbers
 
 import numpy as np
 
+from ._validation import flag
 from .data.model import MeasurementSet
 
 __all__ = ["DIRECTIONAL_KINDS", "OCCLUSION_RADIUS_DEG", "OCCLUSION_RATIO", "WAVELENGTH_MATCH_NM",
@@ -239,9 +240,7 @@ def select_measurements(measurements, *, exclude_mirror_deg=None, max_angle_deg=
     max_angle_deg = _angle_argument("max_angle_deg", max_angle_deg, 0.0, 90.0)
     measured = np.asarray(measurements.wavelength_nm, dtype=float)
     bands = _wavelength_mask(measured, wavelengths, wavelength_range)
-    if not isinstance(exclude_occluded, (bool, np.bool_)):
-        raise TypeError(f"exclude_occluded must be True or False, got {type(exclude_occluded).__name__} "
-                        f"{exclude_occluded!r}")
+    exclude_occluded = flag("exclude_occluded", exclude_occluded)
     if exclude_mirror_deg is None and max_angle_deg is None and bands.all() and not exclude_occluded:
         return measurements
     occluded = occluded_geometries(measurements) if exclude_occluded else {}

@@ -46,7 +46,7 @@ import numpy as np
 
 from ._atomic import atomic_path
 from ._pool import executor_or_local_pool
-from ._validation import broadcast, choice, integer, real_array, real_scalar
+from ._validation import broadcast, choice, flag, integer, real_array, real_scalar
 from ._versions import __version__
 from .instruments import Instrument, channel_directions, get_instrument
 from .physics.adding_doubling import (
@@ -1058,9 +1058,8 @@ def load_table(instrument, *, g="isotropic", n=1.45, settings=None, cache_dir=No
         raise TypeError(f"settings must be a TableSettings or None, got {settings!r} ({type(settings).__name__})")
     if cache_dir is not None and not isinstance(cache_dir, (str, os.PathLike)):
         raise TypeError(f"cache_dir must be a folder path or None, got {cache_dir!r} ({type(cache_dir).__name__})")
-    for name, flag in (("rebuild", rebuild), ("progress", progress)):
-        if not isinstance(flag, (bool, np.bool_)):
-            raise TypeError(f"{name} must be True or False, got {flag!r} ({type(flag).__name__})")
+    flag("rebuild", rebuild)
+    flag("progress", progress)
     if executor is not None and not callable(getattr(executor, "submit", None)):
         raise TypeError(f"executor must be a concurrent.futures.Executor or None, got {executor!r}")
     if isinstance(instrument, Instrument):

@@ -244,4 +244,4 @@ def test_censored_zeros_argument():
                                  "without one eq. (7) gives a reading of 0 no probability")
     with pytest.raises(TypeError) as caught:
         censored_zeros_argument("yes", "infer")
-    assert str(caught.value) == "censored_zeros must be True or False, got str 'yes'"
+    assert str(caught.value) == "censored_zeros must be True or False, got 'yes' (str)"

@@ -144,6 +144,6 @@ def test_occluded_geometries_arguments():
     assert str(caught.value) == "ratio must be a number in (0, 1), got 1.5"
     with pytest.raises(TypeError) as caught:
         select_measurements(_ring_set({}), exclude_occluded="yes")
-    assert str(caught.value) == "exclude_occluded must be True or False, got str 'yes'"
+    assert str(caught.value) == "exclude_occluded must be True or False, got 'yes' (str)"
     with pytest.raises(TypeError):
         occluded_geometries([1, 2])

@@ -9,6 +9,7 @@ from bayespig._validation import (
     DEFAULT_TAU_MIN,
     broadcast,
     choice,
+    flag,
     integer,
     real_array,
     real_scalar,
@@ -121,6 +122,21 @@ def test_choice_lists_the_options():
     assert str(excinfo.value) == "executor must be one of 'serial', 'process', got 'x' (str)"
     with pytest.raises(ValueError, match="^executor must be one of"):
         choice("executor", [1], {"serial"})  # unhashable
+
+
+@pytest.mark.parametrize("value", [True, False, np.bool_(True), np.bool_(False)])
+def test_flag_accepts_bools_as_bool(value):
+    result = flag("warn", value)
+    assert type(result) is bool and result == bool(value)
+
+
+@pytest.mark.parametrize(("value", "shown"), [(1, "1 (int)"), ("yes", "'yes' (str)"), (None, "None (NoneType)"),
+                                               (np.array([1, 0]), "array([1, 0]) (ndarray)")])
+def test_flag_refuses_numbers_words_and_arrays(value, shown):
+    # 1 and "yes" are not flags: truthiness would make flag("progress", "no") mean True
+    with pytest.raises(TypeError) as excinfo:
+        flag("progress", value)
+    assert str(excinfo.value) == f"progress must be True or False, got {shown}"
 
 
 def test_broadcast_names_the_arguments():

@@ -18,12 +18,12 @@ from ..likelihood import (
     check_observed,
     multiplicative_normal_logpdf,
 )
+from .._validation import flag
 from ..rough_table import BINDER_INDEX_NODES, ROUGHNESS_MAX, ROUGHNESS_MIN
 from ..selection import select_measurements
 from .arguments import (
     DEFAULT_EPS,
     check_executor,
-    check_flag,
     check_g,
     check_method,
     check_priors,
@@ -326,7 +326,7 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
         if eps == "infer":
             raise ValueError("eps must be a number in (0, 1) or None (inferred) for infer_problem, got 'infer'")
     check_executor(executor)
-    progress = check_flag("progress", progress)
+    progress = flag("progress", progress)
     priors, settings = check_priors(priors), check_settings(settings)
     noise_floor = noise_floor_argument(noise_floor)
     censored_zeros = censored_zeros_argument(censored_zeros, noise_floor)
@@ -339,7 +339,7 @@ def infer_problem(problem, *, seed=0, g="isotropic", eps=0.05, executor=None, pr
         raise ValueError(f"noise_floor is not available with {' and '.join(spec.title for spec in shared)} "
                          "(the joint run over all wavelengths infers one floor per band, noise_floor='infer', "
                          "or has none)")
-    incidence_offset = check_flag("incidence_offset", incidence_offset)
+    incidence_offset = flag("incidence_offset", incidence_offset)
     if incidence_offset and not (shared and noise_floor == "infer"):
         raise ValueError("incidence_offset=True needs the joint run over all wavelengths with an inferred noise "
                          "floor (roughness='free' and noise_floor='infer')")
@@ -551,7 +551,7 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
     method, seed, g = check_method(method), check_seed(seed), check_g(g)
     eps = eps_argument(eps)
     check_executor(executor)
-    progress = check_flag("progress", progress)
+    progress = flag("progress", progress)
     priors, settings = check_priors(priors), check_settings(settings)
     substrate_sd = check_substrate_sd(substrate_sd)
     noise_floor = noise_floor_argument(noise_floor)
@@ -563,8 +563,8 @@ def infer(measurements, *, method="auto", seed=0, g="isotropic", eps=None, execu
                          f"surface's roughness, on the tables of a rough surface), got roughness={roughness!r}")
     if binder_index_prior is not None and binder_index != "free":
         raise ValueError("binder_index_prior is used with binder_index='free' only")
-    flakes = check_flag("flakes", flakes)
-    incidence_offset = check_flag("incidence_offset", incidence_offset)
+    flakes = flag("flakes", flakes)
+    incidence_offset = flag("incidence_offset", incidence_offset)
     if incidence_offset and (roughness != "free" or noise_floor != "infer"):
         raise ValueError("incidence_offset=True needs roughness='free' and noise_floor='infer' (the offset is "
                          f"inferred in the joint run with the floor), got roughness={roughness!r}, "

@@ -13,6 +13,7 @@ import numbers
 
 import numpy as np
 
+from .._validation import flag
 from ..likelihood import Priors, method_name, noise_floor_argument
 from .settings import InferenceSettings
 
@@ -20,7 +21,6 @@ __all__ = [
     "DEFAULT_EPS",
     "EPS_RANGE",
     "check_executor",
-    "check_flag",
     "check_g",
     "check_method",
     "check_priors",
@@ -105,13 +105,6 @@ def check_executor(executor):
     return executor
 
 
-def check_flag(name, value):
-    """A bool argument (``True``/``False``, numpy's bools too)."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be True or False, got {_shown(value)}")
-    return bool(value)
-
-
 def check_priors(priors):
     """``priors``: None (the defaults) or a :class:`~bayespig.likelihood.Priors`."""
     priors = Priors() if priors is None else priors
@@ -149,7 +142,7 @@ def check_selection(*, exclude_mirror_deg=None, max_angle_deg=None, wavelengths=
     What needs the set (a wavelength that is not measured, a selection that leaves nothing) is
     checked by :func:`bayespig.selection.select_measurements`.
     """
-    check_flag("exclude_occluded", exclude_occluded)
+    flag("exclude_occluded", exclude_occluded)
     for name, value, high in (("exclude_mirror_deg", exclude_mirror_deg, 180.0),
                               ("max_angle_deg", max_angle_deg, 90.0)):
         if value is None:

@@ -172,8 +172,9 @@ import numpy as np
 from scipy import optimize, sparse
 
 from .._pool import executor_or_local_pool
+from .._validation import flag
 from .._versions import package_versions
-from ..inference.arguments import check_flag, check_substrate_sd
+from ..inference.arguments import check_substrate_sd
 from ..inference.card_factors import FACTOR_PRIOR_SDS, CardFactors, card_indices
 from ..inference.concentration_factors import (CONCENTRATION_PRIOR_SDS, ConcentrationFactors,
                                                check_concentration_sd)
@@ -819,7 +820,7 @@ def build_library(measurements, *, model="radiative-transfer", seed=0, executor=
     -------
     PigmentLibrary
     """
-    progress = check_flag("progress", progress)
+    progress = flag("progress", progress)
     if not (isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and seed >= 0):
         raise TypeError(f"seed must be a non-negative integer, got {seed!r}")
     if not (np.isfinite(eps) and eps > 0):

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._atomic import atomic_path, write_text_atomically
-from .._validation import integer, real_scalar
+from .._validation import flag, integer, real_scalar
 from ..instruments import get_instrument
 from ..likelihood import Priors, Problem, method_name
 
@@ -217,8 +217,7 @@ def simulation_based_calibration(method="method4", *, n_replicates=200, n_draws=
     get_instrument(instrument)
     if settings is not None and not isinstance(settings, InferenceSettings):
         raise TypeError(f"settings must be an InferenceSettings or None, got {settings!r} ({type(settings).__name__})")
-    if not isinstance(progress, (bool, np.bool_)):
-        raise TypeError(f"progress must be True or False, got {progress!r} ({type(progress).__name__})")
+    flag("progress", progress)
     if (n_draws + 1) % n_bins:
         raise ValueError(f"n_draws + 1 ({n_draws + 1}) must be a positive multiple of n_bins ({n_bins})")
     settings = InferenceSettings() if settings is None else settings

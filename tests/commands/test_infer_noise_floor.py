@@ -106,4 +106,4 @@ def test_exclude_occluded_must_be_a_flag():
 
     with pytest.raises(TypeError) as caught:
         infer("never-read.csv", exclude_occluded="yes")
-    assert str(caught.value) == "exclude_occluded must be True or False, got str 'yes'"
+    assert str(caught.value) == "exclude_occluded must be True or False, got 'yes' (str)"

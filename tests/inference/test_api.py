@@ -251,7 +251,7 @@ _SUBSTRATE_SD = "substrate_sd must be a positive number (the prior sd of log f, 
     ({"executor": "x"}, TypeError, ("executor must be None (a local pool of 2 processes) or a concurrent.futures-style "
                                    "executor with a submit method (e.g. ProcessPoolExecutor, a dask client's "
                                    "get_executor()), got str 'x'")),
-    ({"progress": "yes"}, TypeError, "progress must be True or False, got str 'yes'"),
+    ({"progress": "yes"}, TypeError, "progress must be True or False, got 'yes' (str)"),
     ({"priors": 3}, TypeError, "priors must be a bayespig.likelihood.Priors, got int"),
     ({"settings": {}}, TypeError, "settings must be an InferenceSettings, got dict"),
     ({"substrate_sd": True}, TypeError, _SUBSTRATE_SD + "bool True"),

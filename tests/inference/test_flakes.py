@@ -127,7 +127,7 @@ def test_bad_flake_arguments_are_refused_with_one_clear_message(metallic_set, mo
                                  "joint run with the surface's), got roughness=None")
     with pytest.raises(TypeError) as caught:
         infer(metallic_set, roughness="free", flakes="yes", progress=False)
-    assert str(caught.value) == "flakes must be True or False, got str 'yes'"
+    assert str(caught.value) == "flakes must be True or False, got 'yes' (str)"
     with pytest.raises(ValueError) as caught:
         Priors(flake_reflectance_range=(0.0, 1.0))
     assert str(caught.value) == ("flake_reflectance_range must start above 0 (a log-uniform prior), "
