@@ -824,7 +824,7 @@ def surface_parameters(idata, probability=0.9):
     return out
 
 
-def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
+def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None, seed=0):
     """Posterior predictive check per wavelength: can the model reproduce the measured values?
 
     The discrepancy is the chi-square of the noise model (paper eq. 7),
@@ -852,6 +852,16 @@ def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
     A small ``p`` still flags values that no parameters in the prior's support can produce
     (e.g. a film on white darker than on black).
 
+    With censored zeros (``infer(..., censored_zeros=True)``) an exact 0 is the event
+    "reading <= 0" of probability ``P0 = Phi(-mu / sigma)`` (its stored log-likelihood), not a
+    Gaussian value: its term in ``T`` is ``z^2`` of the randomised quantile residual
+    ``z = Phi^-1(u P0)``, ``u ~ U(0, 1)`` (Dunn & Smyth 1996, J. Comput. Graph. Stat. 5, 236),
+    which is exactly N(0, 1) under the model, so ``T`` stays ``chi2(n)``; a zero where the draw
+    predicts a clearly positive reading (``P0`` tiny) gives a large ``|z|``. The positive readings
+    keep their Gaussian ``z`` (with the incidence offset the sd is taken at the reading, as for
+    every value here). At the posterior mean (``z``, ``chi2``, ``worst``) a zero's residual is the
+    mid-quantile ``Phi^-1(P0 / 2)`` of the draws' mean ``P0``.
+
     Parameters
     ----------
     idata : arviz.InferenceData
@@ -860,6 +870,9 @@ def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
         Wavelengths with ``p < level`` are flagged.
     max_draws : int, optional
         Use at most this many posterior draws (evenly thinned).
+    seed : int
+        Seeds ``numpy.random.default_rng`` for the randomised residuals of censored zeros (unused
+        without censoring).
 
     Returns
     -------
@@ -897,6 +910,10 @@ def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
     with np.errstate(divide="ignore", invalid="ignore"):
         floor = noise_floor_per_value(idata, draws=True, max_draws=max_draws)
         z2 = np.where(measured, ((observed - predicted) / noise_sd(predicted, eps, floor)) ** 2, 0.0)
+    zero_p = _censored_zero_probability(idata, measured & (observed == 0), max_draws)
+    if zero_p is not None:
+        u = np.random.default_rng(seed).uniform(size=zero_p.shape)
+        z2 = np.where(np.isnan(zero_p), z2, _censored_residual(u * zero_p) ** 2)
     chi2_draws = z2.sum(axis=-1)  # (n_draws, n_wavelengths)
     p_value = stats.chi2.sf(chi2_draws, np.maximum(n_values, 1)).mean(axis=0)
     p_value = np.where(n_values > 0, p_value, np.nan)
@@ -904,6 +921,9 @@ def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
     eps_mean = eps_per_value(idata)
     with np.errstate(divide="ignore", invalid="ignore"):
         z = (observed - mean) / noise_sd(mean, eps_mean, noise_floor_per_value(idata))
+    if zero_p is not None:
+        mean_p = zero_p.mean(axis=0)
+        z = np.where(np.isnan(mean_p), z, _censored_residual(0.5 * mean_p))
     chi2 = np.nansum(np.where(measured, z * z, 0.0), axis=-1)
     worst = np.argmax(np.where(measured, np.abs(np.nan_to_num(z, nan=np.inf)), -1.0), axis=-1)
     n_parameters = np.full(n_values.shape, parameters_per_wavelength(idata))
@@ -911,6 +931,26 @@ def posterior_predictive_check(idata, level=PPC_LEVEL, max_draws=None):
     return {"p_value": p_value, "chi2": chi2, "n_values": n_values, "flagged": p_value < level,
             "worst": worst, "z": z, "level": float(level), "n_parameters": n_parameters,
             "testable": testable}
+
+
+def _censored_zero_probability(idata, zero, max_draws):
+    """``P0 = P(reading <= 0)`` of every censored zero per draw, NaN elsewhere, from the stored
+    log-likelihood (draws, *observed shape); None when the zeros are not censored or none is."""
+    attrs = idata.posterior.attrs
+    if not (int(attrs.get("censored_zeros", 0)) and zero.any() and "log_likelihood" in idata.groups()):
+        return None
+    observed = idata.observed_data["y"]
+    terms = idata.log_likelihood["y"].transpose("chain", "draw", *observed.dims).values
+    terms = _thin(terms.reshape((-1,) + terms.shape[2:]), max_draws)
+    return np.where(zero, np.exp(np.minimum(terms, 0.0)), np.nan)
+
+
+def _censored_residual(probability):
+    """``Phi^-1(probability)``, kept finite where ``probability`` underflows to 0 (a zero the draw
+    makes impossible: ``|z|`` 38, the double's limit, flags it all the same)."""
+    from scipy import special
+
+    return special.ndtri(np.maximum(probability, np.finfo(float).tiny))
 
 
 def parameters_per_wavelength(idata):

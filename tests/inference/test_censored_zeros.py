@@ -40,7 +40,6 @@ def clipped_set():
                     wavelengths=WAVELENGTHS, eps=EPS_TRUE, seed=1, model=lambda **kw: _readings(**kw, offset=CLIPPING_OFFSET))
 
 
-@pytest.mark.slow  # beside test_incidence_offset on one xdist worker its fixture run got capped (unexplained)
 def test_censored_joint_run_stores_the_censored_terms_of_the_zeros(clipped_set):
     # the joint run's wiring: its stored log-likelihood of each exact zero is log Phi(-mu / sigma) with mu the
     # direct solver's BRDF at the draw less b / cos theta_i (not the Gaussian density at 0, ~ +5 here), and

@@ -236,3 +236,39 @@ def test_censored_zeros_cover_the_floor_and_a_over_realisations():
             low, high = np.quantile(idata.posterior[name].values.reshape(-1, 2), [tail, 1 - tail], axis=0)
             covered[name] += int(((low <= truth) & (truth <= high)).sum())
     assert covered["noise_floor"] >= 12 and covered["a"] >= 12, covered
+
+
+@pytest.fixture(scope="module")
+def clipped_idata():
+    """One realisation of the censored-zeros study above, fitted with censored zeros."""
+    design = ([{"name": f"opaque{k}", "opaque": True} for k in range(3)]
+              + [{"name": f"thin{k}", "substrate": "black", "film_group": "thin"} for k in range(3)])
+    clean = simulate(a=np.array([0.05, 0.1]), tau=[0.15, 0.15], design=design, wavelengths=[450.0, 600.0], eps=0.0)
+    rng = np.random.default_rng(100)
+    ms = _with_values(clean, lambda k, j, v: np.maximum(
+        v * (1 + EPS_TRUE * rng.standard_normal(v.shape)) + CLIPPED_FLOOR * rng.standard_normal(v.shape), 0.0))
+    return infer(ms, method="general", eps=EPS_TRUE, noise_floor="infer", seed=0, progress=False, settings=FAST,
+                 censored_zeros=True)
+
+
+def test_model_check_reads_censored_zeros_by_their_probability(clipped_idata):
+    # the model is right: no band flagged. A zero that every draw makes near impossible (its stored
+    # log P0 set to -30, as if the draws predicted readings ~6 sd above 0) is flagged, and is the worst value
+    observed = clipped_idata.observed_data["y"].values
+    zero = observed == 0
+    assert zero.sum() >= 3
+    check = posterior_predictive_check(clipped_idata)
+    assert not check["flagged"].any(), check["p_value"]
+    # a zero's residual at the mean is Phi^-1(P0 / 2) of the draws' mean P0, never the Gaussian z of a 0 reading
+    p0 = np.exp(clipped_idata.log_likelihood["y"].values.astype(float)).reshape(-1, *observed.shape).mean(axis=0)
+    np.testing.assert_allclose(check["z"][zero], stats.norm.ppf(0.5 * p0[zero]), rtol=1e-6)
+    band, value = np.argwhere(zero)[0]
+    corrupted = clipped_idata.copy()
+    terms = corrupted.log_likelihood["y"].values
+    terms[..., band, value] = -30.0
+    corrupted.log_likelihood["y"].values = terms
+    bad = posterior_predictive_check(corrupted)
+    assert bad["flagged"][band] and bad["worst"][band] == value
+    assert not bad["flagged"][1 - band]
+    # the randomised residuals are seeded: the same seed, the same p
+    np.testing.assert_array_equal(bad["p_value"], posterior_predictive_check(corrupted)["p_value"])
