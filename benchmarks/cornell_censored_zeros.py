@@ -3,7 +3,7 @@
 Run from the repository root (prints only; a few minutes per paint once the Cornell rough tables
 are cached, e.g. by ``bayespig cornell``)::
 
-    python benchmarks/cornell_censored_zeros.py [krylon_blue,garnet_red] [420,450,600]
+    python benchmarks/cornell_censored_zeros.py [krylon_blue,garnet_red] [420,450,600] [exclude-occluded]
 
 The joint fit of the Cornell study (every geometry > 2 deg from the mirror, roughness and binder
 index free, flakes, the incidence offset, one noise floor per band; ``bayespig.studies.cornell``)
@@ -11,7 +11,10 @@ at a few bands, once with the zeros as Gaussian readings of the clipped mean (th
 once with ``censored_zeros=True`` (``P(reading <= 0)`` for every exact zero). Printed per band:
 the posterior median and 90 % interval of ``a``, of the floor ``sigma0`` and of the offset ``b``;
 the zeros' mean log-likelihood per reading; the median |x / m - 1| of the positive readings
-(all, and at 70-80 deg incidence where the zeros are); the run's steps and wall time.
+(all, and at 70-80 deg incidence where the zeros are); the model check's p-value
+(``bayespig.report.quantities.posterior_predictive_check``: with censoring the zeros enter by their
+probability); the run's steps and wall time. ``exclude-occluded`` leaves out the occluded geometries
+(``bayespig.selection.occluded_geometries``) as the study does; by default they stay in.
 """
 import sys
 import time
@@ -21,6 +24,7 @@ import numpy as np
 
 from bayespig.data import read_measurements
 from bayespig.inference import infer
+from bayespig.report.quantities import posterior_predictive_check
 from bayespig.selection import select_measurements
 from bayespig.studies.cornell import EPS, MIRROR_CUT_DEG, CornellStudySettings, default_cornell_path
 
@@ -29,11 +33,14 @@ from _common import machine_line
 
 paints = (sys.argv[1] if len(sys.argv) > 1 else "krylon_blue,garnet_red").split(",")
 bands = [float(b) for b in (sys.argv[2] if len(sys.argv) > 2 else "420,450,600").split(",")]
+exclude_occluded = "exclude-occluded" in sys.argv[3:]
 study = CornellStudySettings()
 print(machine_line())
+print(f"occluded geometries {'left out' if exclude_occluded else 'kept'}")
 for paint in paints:
     ms = select_measurements(read_measurements(default_cornell_path() / f"{paint}.astm", opaque=True),
-                             exclude_mirror_deg=MIRROR_CUT_DEG, wavelengths=bands)
+                             exclude_mirror_deg=MIRROR_CUT_DEG, wavelengths=bands,
+                             exclude_occluded=exclude_occluded)
     rows = ms.films[0].measurements
     theta_i = np.array([m.theta_i for m in rows])
     x = np.array([m.values for m in rows])  # (n_geometries, n_bands)
@@ -55,6 +62,7 @@ for paint in paints:
         y = np.median(predicted.reshape((-1, len(bands), len(rows))), axis=0).T  # (n_geometries, n_bands)
         pointwise = idata.log_likelihood["y"].transpose("chain", "draw", "wavelength", ...).values
         loglik = pointwise.reshape((-1, len(bands), len(rows))).mean(axis=0).T
+        p_value = posterior_predictive_check(idata)["p_value"]
         print(f"  {'censored' if censored else 'gaussian'}: {seconds:.0f} s, steps {steps}"
               + (" (capped)" if capped else ""))
         for k, band in enumerate(bands):
@@ -68,4 +76,5 @@ for paint in paints:
             zeros_ll = loglik[zero[:, k], k].mean() if zero[:, k].any() else float("nan")
             print(f"    {band:g} nm: a {interval('a')}, floor {interval('noise_floor')}, "
                   f"b {interval('incidence_offset')}, zeros' log-lik {zeros_ll:.2f}, "
-                  f"|res| {np.median(rel):.3f} (70-80 deg {np.median(rel[grazing]):.3f})")
+                  f"|res| {np.median(rel):.3f} (70-80 deg {np.median(rel[grazing]):.3f}), "
+                  f"model check p {p_value[k]:.3g}")
