@@ -1,5 +1,6 @@
 """Shared fixtures."""
 
+import os
 import signal
 
 import pytest
@@ -18,13 +19,26 @@ def ctrl_c_as_in_a_terminal():
     yield
 
 
+@pytest.fixture(scope="session")
+def test_run_table_cache(tmp_path_factory):
+    """One temporary table cache for the whole test run (all xdist workers: their base folders share
+    a parent), so a table two modules need is built once (the cache's writes are atomic, so two
+    workers building one table at once is safe: one file wins, both are whole)."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent
+    path = root / "table-cache"
+    path.mkdir(exist_ok=True)
+    return path
+
+
 @pytest.fixture(scope="module")
-def private_table_cache(tmp_path_factory):
-    """A module's look-up tables are built into a temporary cache (the user's cache is untouched).
+def private_table_cache(test_run_table_cache):
+    """A module's look-up tables are built into (or read from) the test run's temporary cache, never
+    the user's: ``BAYESPIG_CACHE`` points there while the module runs.
 
     Use with ``pytestmark = pytest.mark.usefixtures("private_table_cache")`` or as an argument.
     """
-    path = tmp_path_factory.mktemp("table-cache")
     with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("BAYESPIG_CACHE", str(path))
-        yield path
+        patch.setenv("BAYESPIG_CACHE", str(test_run_table_cache))
+        yield test_run_table_cache
