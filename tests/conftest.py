@@ -20,7 +20,7 @@ def ctrl_c_as_in_a_terminal():
 
 
 @pytest.fixture(scope="session")
-def test_run_table_cache(tmp_path_factory):
+def run_table_cache(tmp_path_factory):
     """One temporary table cache for the whole test run (all xdist workers: their base folders share
     a parent), so a table two modules need is built once (the cache's writes are atomic, so two
     workers building one table at once is safe: one file wins, both are whole)."""
@@ -33,12 +33,12 @@ def test_run_table_cache(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def private_table_cache(test_run_table_cache):
+def private_table_cache(run_table_cache):
     """A module's look-up tables are built into (or read from) the test run's temporary cache, never
     the user's: ``BAYESPIG_CACHE`` points there while the module runs.
 
     Use with ``pytestmark = pytest.mark.usefixtures("private_table_cache")`` or as an argument.
     """
     with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("BAYESPIG_CACHE", str(test_run_table_cache))
-        yield test_run_table_cache
+        patch.setenv("BAYESPIG_CACHE", str(run_table_cache))
+        yield run_table_cache
