@@ -28,7 +28,7 @@ and :func:`write_cornell_report` writes ``reports/cornell.md`` with its figures 
 Goals (issue 16): median ``|x_obs / x_fit - 1|`` over the geometries more than 2 deg from the
 mirror <= :data:`RESIDUAL_GOAL` at the bands where the body dominates
 (:data:`BODY_BANDS_NM`), and overlapping subset intervals at >= :data:`OVERLAP_GOAL` of the
-bands.
+bands, a band counting only where both subset runs' ``a`` mixed there (:func:`overlap_goal`).
 """
 
 from __future__ import annotations
@@ -58,6 +58,7 @@ __all__ = [
     "fit_summary",
     "interval_overlap",
     "mirror_band_subset",
+    "overlap_goal",
     "write_cornell_report",
 ]
 
@@ -281,15 +282,48 @@ def _infer(measurements, settings, **kwargs):
     return summary
 
 
-def _mixing_note(result):
-    """How many of a paint's overlapping subset bands have a subset run whose ``a`` did not mix."""
-    mixed = result["far"]["a_mixed"] & result["near"]["a_mixed"]
-    overlap = result["overlap"]
-    unmixed = int(np.sum(overlap & ~mixed))
-    if not unmixed:
-        return "; both runs' a mixed at every overlapping band"
-    return (f"; at {unmixed} of the {int(overlap.sum())} overlapping bands a subset run's a did not mix, "
-            f"so {int(np.sum(overlap & mixed))} of {overlap.size} overlap with both runs mixed")
+def overlap_goal(result):
+    """The subset-consistency goal of issue 16 for one paint, counting converged intervals only.
+
+    An interval from a run whose ``a`` did not mix at that band (R-hat or ESS of ``a`` outside
+    :data:`bayespig.report.quantities.RHAT_MAX` / ``ESS_MIN``) is not a posterior interval but
+    the spread of chains that disagree, and its overlap with the other subset's says nothing;
+    so a band counts towards the goal only where the two intervals overlap *and* both runs'
+    ``a`` mixed there.
+
+    Parameters
+    ----------
+    result : dict
+        A paint's result of :func:`cornell_study`: ``overlap`` (bool per band) and the subset
+        fits ``far`` and ``near`` with ``a_mixed`` (bool per band, :func:`fit_summary`).
+
+    Returns
+    -------
+    dict
+        ``bands`` (number of subset bands), ``overlapping`` (bands whose intervals overlap),
+        ``mixed`` (bands where both runs mixed), ``counted`` (overlapping and both mixed),
+        ``share`` (``counted / bands``, nan without bands) and ``met``
+        (``share >= OVERLAP_GOAL``).
+    """
+    overlap = np.asarray(result["overlap"], dtype=bool)
+    runs = [np.asarray(result[fit]["a_mixed"], dtype=bool) for fit in ("far", "near")]
+    for fit, run in zip(("far", "near"), runs):
+        if run.shape != overlap.shape:
+            raise ValueError(f"the {fit} subset run's a_mixed has shape {run.shape}, the overlap {overlap.shape}")
+    mixed = runs[0] & runs[1]
+    counted = int(np.sum(overlap & mixed))
+    share = counted / overlap.size if overlap.size else float("nan")
+    return {"bands": int(overlap.size), "overlapping": int(overlap.sum()), "mixed": int(mixed.sum()),
+            "counted": counted, "share": share, "met": bool(share >= OVERLAP_GOAL)}
+
+
+def _overlap_goal_text(goal):
+    """The goal line's count: converged overlaps first, then what the unmixed runs add."""
+    text = f"{goal['counted']} of {goal['bands']} bands overlap with both runs' a mixed, {_pct(goal['share'])}"
+    if goal["mixed"] < goal["bands"]:
+        text += (f"; both runs mixed at {goal['mixed']} of {goal['bands']} bands; counting the runs that did not "
+                 f"mix, {goal['overlapping']} of {goal['bands']} intervals overlap")
+    return text
 
 
 def _beyond_lobe_lines(result, wl):
@@ -457,6 +491,15 @@ def _table(header, rows):
     return "\n".join(lines)
 
 
+def _shown_folder(folder):
+    """The data folder as the report shows it: relative to the working folder (as the user would
+    type it), so the report does not record the absolute path of the machine it ran on."""
+    try:
+        return os.path.relpath(folder)
+    except ValueError:  # another drive (Windows)
+        return str(folder)
+
+
 def _pct(x):
     return "n/a" if x is None or not np.isfinite(x) else f"{100.0 * x:.1f} %"
 
@@ -527,7 +570,7 @@ def cornell_report(study):
     lines = ["# Cornell gonio paints: rough-surface fits (issue 16)", "",
              ("Regenerate with one command (from the repository root; data in `../shared/data/cornell` or "
              "`$BAYESPIG_CORNELL`):"), "", "    bayespig cornell", "",
-             (f"Data: `{study['folder']}` (Cornell Program of Computer Graphics gonioreflectometer, ASTM E1392; "
+             (f"Data: `{_shown_folder(study['folder'])}` (Cornell Program of Computer Graphics gonioreflectometer, ASTM E1392; "
              "see its README). Each paint is read as an opaque film (`read_measurements(path, opaque=True)`)."),
              "",
              ("Model: opaque isotropic layer under a rough GGX air/binder surface (`bayespig.physics.rough_surface`), "
@@ -584,9 +627,8 @@ def cornell_report(study):
         # goals
         body_wl, body_res, residual_ok = _body_residual_goal(paint, full)
         overlap = result["overlap"]
-        share = float(np.mean(overlap)) if overlap.size else float("nan")
-        overlap_ok = bool(share >= OVERLAP_GOAL)
-        goals.append((name, body_wl, body_res, residual_ok, share, overlap_ok, overlap.size,
+        overlap_verdict = overlap_goal(result)
+        goals.append((name, body_wl, body_res, residual_ok, overlap_verdict,
                       " / ".join(_interval(*result[k]["roughness"], digits=3) for k in ("full", "far", "near")),
                       " / ".join(_interval(*result[k]["binder_index"], digits=3) if result[k]["binder_index"]
                                  else "1.45 (fixed)" for k in ("full", "far", "near"))))
@@ -595,9 +637,9 @@ def cornell_report(study):
                   f"{BODY_BANDS_NM[paint][1]:g} nm: **{'met' if residual_ok else 'NOT met'}** "
                   f"(worst {_pct(float(np.max(body_res))) if body_res.size else 'n/a'}, "
                   f"{int(np.sum(body_res <= RESIDUAL_GOAL))} of {body_res.size} bands within)."),
-                  (f"- Subset intervals overlap at >= {_pct(OVERLAP_GOAL)} of bands: "
-                  f"**{'met' if overlap_ok else 'NOT met'}** ({int(overlap.sum())} of {overlap.size} bands, "
-                  f"{_pct(share)}" + _mixing_note(result) + ")."), ""]
+                  (f"- Subset intervals overlap at >= {_pct(OVERLAP_GOAL)} of bands, both runs mixed: "
+                  f"**{'met' if overlap_verdict['met'] else 'NOT met'}** ({_overlap_goal_text(overlap_verdict)})."),
+                  ""]
         # a(lambda) table
         check = full["check"]
         lines += ["### a(λ), noise floor, residuals and the model check (full fit)", "",
@@ -713,8 +755,10 @@ def cornell_report(study):
                        "binder index: full / far / near subset"],
                       [[n, f"{bw[0]:g}-{bw[-1]:g} nm" if bw.size else "none fitted",
                         ", ".join(_pct(v) for v in br) or "n/a", "met" if rok else "NOT met",
-                        f"{_pct(sh)} of {nb} bands", "met" if ook else "NOT met", alphas, indices]
-                       for n, bw, br, rok, sh, ook, nb, alphas, indices in goals]), "",
+                        f"{_pct(ov['share'])} of {ov['bands']} bands with both runs mixed "
+                        f"({_pct(ov['overlapping'] / ov['bands']) if ov['bands'] else 'n/a'} counting unmixed runs)",
+                        "met" if ov["met"] else "NOT met", alphas, indices]
+                       for n, bw, br, rok, ov, alphas, indices in goals]), "",
                ("The surface of the two subsets, each one GGX alpha (and binder index) for all bands, tells "
                 "whether one microfacet surface describes the paint near and far from the mirror alike: where "
                 "their intervals are apart, the surface model (not the pigment) is what the data reject, and "
