@@ -180,7 +180,7 @@ def channel_values(instrument, terms, r_s):
     numpy.ndarray
         Shape (B, n_channels).
     """
-    theta_in, theta_out, index_in, index_out = channel_directions(instrument)
+    _, _, index_in, index_out = channel_directions(instrument)
     out = np.empty((r_s.shape[0], len(instrument)))
     gain = terms.substrate_gain(r_s)
     m = np.arange(terms.f0_modes.shape[1])

@@ -316,7 +316,7 @@ def flake_reflection_brdf(mu_i, mu_o, psi, *, alpha, n, distribution="ggx"):
     alpha = alpha.astype(float)
     if not (np.isfinite(alpha).all() and (alpha > 0).all()):
         raise ValueError(f"alpha must be > 0, got {alpha!r}")
-    n_i, n = _check_indices(1.0, n)
+    _, n = _check_indices(1.0, n)
     if n < 1.0:
         # light from air would be totally reflected at the surface for most angles (nan below)
         raise ValueError(f"n (binder index) must be > 1 (a binder denser than air), got {n}")
