@@ -76,7 +76,12 @@ def run_cornell(args):
     """Run the study and write the report; returns the exit code."""
     import dataclasses
 
-    from ..studies.cornell import CornellStudySettings, cornell_study, write_cornell_report
+    from ..studies.cornell import (
+        CornellStudySettings,
+        cornell_study,
+        overlap_goal,
+        write_cornell_report,
+    )
 
     for name in ("max_steps", "draws_per_chain"):
         value = getattr(args, name)
@@ -99,8 +104,10 @@ def run_cornell(args):
     progress = progress_printer(args)
     study = cornell_study(folder, settings=settings, progress=progress, jobs=args.jobs)
     path = write_cornell_report(study, args.report)
+    goals = {paint: overlap_goal(result) for paint, result in study["paints"].items()}
     print(f"wrote {path}: " + "; ".join(
-        f"{paint} roughness {result['full']['roughness'][1]:.4f}, subset overlap at "
-        f"{int(result['overlap'].sum())} of {result['overlap'].size} bands"
+        f"{paint} roughness {result['full']['roughness'][1]:.4f}, subset overlap with both runs mixed at "
+        f"{goals[paint]['counted']} of {goals[paint]['bands']} bands ({goals[paint]['overlapping']} counting "
+        "unmixed runs)"
         for paint, result in study["paints"].items()))
     return 0

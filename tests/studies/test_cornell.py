@@ -143,6 +143,22 @@ def test_tiny_study_report_structure(tiny_study, tmp_path):
     assert "Light beyond the surface lobe (full fit)" in text
 
 
+def test_cli_prints_the_converged_overlap_count(tiny_study, tmp_path, monkeypatch, capsys):
+    """``bayespig cornell``'s last line counts the overlaps as the report's goal does (both runs
+    mixed), with the plain count beside it (the study itself is the module's tiny one)."""
+    import bayespig.studies.cornell as cornell
+
+    monkeypatch.setattr(cornell, "cornell_study", lambda *args, **kwargs: tiny_study)
+    parser = argparse.ArgumentParser()
+    add_cornell_parser(parser.add_subparsers())
+    args = parser.parse_args(["cornell", str(CORNELL), "--report", str(tmp_path / "cornell.md"), "--quiet"])
+    assert args.func(args) == 0
+    goal = overlap_goal(tiny_study["paints"]["garnet_red"])
+    assert (f"subset overlap with both runs mixed at {goal['counted']} of 2 bands ({goal['overlapping']} counting "
+            "unmixed runs)") in capsys.readouterr().out
+    assert (tmp_path / "cornell.md").exists()
+
+
 def test_the_paints_fitted_at_once_give_the_same_study(tiny_study):
     """Two paints on two workers: each paint's fits equal its serial fit alone (the garnet red's
     is the module's tiny study), so a paint's draws do not depend on what else is fitted."""
