@@ -26,7 +26,12 @@ from bayespig.data import read_measurements
 from bayespig.inference import infer
 from bayespig.report.quantities import posterior_predictive_check
 from bayespig.selection import select_measurements
-from bayespig.studies.cornell import EPS, MIRROR_CUT_DEG, CornellStudySettings, default_cornell_path
+from bayespig.studies.cornell import (
+    MIRROR_CUT_DEG,
+    CornellStudySettings,
+    default_cornell_path,
+    rough_fit_arguments,
+)
 
 sys.path.insert(0, "benchmarks")
 from _common import machine_line
@@ -51,9 +56,7 @@ for paint in paints:
         started = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            idata = infer(ms, eps=EPS, noise_floor="infer", seed=study.seed, progress=False,
-                          settings=study.inference, roughness="free", binder_index=study.binder_index,
-                          flakes=study.flakes, incidence_offset=study.incidence_offset, censored_zeros=censored)
+            idata = infer(ms, censored_zeros=censored, **rough_fit_arguments(study))
         seconds = time.perf_counter() - started
         post = idata.posterior
         steps = int(idata.sample_stats["n_steps"].values.max())

@@ -24,10 +24,10 @@ import numpy as np
 from bayespig.data import read_measurements
 from bayespig.inference import infer
 from bayespig.studies.cornell import (
-    EPS,
     CornellStudySettings,
     default_cornell_path,
     interval_overlap,
+    rough_fit_arguments,
     study_sets,
 )
 
@@ -46,10 +46,7 @@ for name in subsets:
     started = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the cap and convergence warnings: the diagnostics below say it
-        idata = infer(measurements, eps=EPS, noise_floor="infer", seed=study.seed, progress=False,
-                      settings=study.inference, wavelengths=bands, roughness="free",
-                      binder_index=study.binder_index, flakes=study.flakes,
-                      incidence_offset=study.incidence_offset)
+        idata = infer(measurements, wavelengths=bands, **rough_fit_arguments(study))
     seconds = time.perf_counter() - started
     n_geometries = len(measurements.films[0].measurements)
     steps = idata.sample_stats["n_steps"].values

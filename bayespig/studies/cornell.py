@@ -59,6 +59,7 @@ __all__ = [
     "interval_overlap",
     "mirror_band_subset",
     "overlap_goal",
+    "rough_fit_arguments",
     "write_cornell_report",
 ]
 
@@ -270,12 +271,41 @@ def fit_summary(idata, *, interval=INTERVAL):
     return out
 
 
+def rough_fit_arguments(settings):
+    """The keyword arguments of :func:`bayespig.infer` of the study's rough fits (full and subsets).
+
+    One place for them, so a benchmark that refits a set of the study (e.g.
+    ``benchmarks/cornell_subsets_few_bands.py``) fits the same model with the same priors,
+    sampler settings and seed.
+
+    Parameters
+    ----------
+    settings : CornellStudySettings
+
+    Returns
+    -------
+    dict
+        ``eps`` (:data:`EPS`), ``noise_floor="infer"``, ``seed``, ``progress=False``, the sampler
+        ``settings``, ``roughness="free"``, ``binder_index``, ``flakes`` and ``incidence_offset``.
+    """
+    return {**_sampler_arguments(settings), **_surface_arguments(settings)}
+
+
+def _sampler_arguments(settings):
+    return {"eps": EPS, "noise_floor": "infer", "seed": settings.seed, "progress": False,
+            "settings": settings.inference}
+
+
+def _surface_arguments(settings):
+    return {"roughness": "free", "binder_index": settings.binder_index, "flakes": settings.flakes,
+            "incidence_offset": settings.incidence_offset}
+
+
 def _infer(measurements, settings, **kwargs):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         started = time.perf_counter()
-        idata = infer(measurements, eps=EPS, noise_floor="infer", seed=settings.seed, progress=False,
-                      settings=settings.inference, **kwargs)
+        idata = infer(measurements, **_sampler_arguments(settings), **kwargs)
     summary = fit_summary(idata)
     summary["seconds"] = time.perf_counter() - started
     summary["warnings"] = sorted({str(w.message) for w in caught})
@@ -460,8 +490,7 @@ def _study_paint(folder, settings, paint, progress, started):
                          "far": _n_geometries(far), "near": _n_geometries(near)}}
     result["instrument_binder_index"] = _rough_instrument(full).n
     bands = None if settings.full_bands is None else list(settings.full_bands)
-    surface = {"roughness": "free", "binder_index": settings.binder_index, "flakes": settings.flakes,
-               "incidence_offset": settings.incidence_offset}
+    surface = _surface_arguments(settings)
     say(f"{paint}: full fit, {result['counts']['full']} geometries, roughness"
         + (" and binder index" if settings.binder_index else "") + " free"
         + (", with flakes" if settings.flakes else "")
