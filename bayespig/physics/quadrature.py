@@ -20,7 +20,7 @@ import numpy as np
 from .fresnel import critical_cosine
 
 __all__ = ["DEFAULT_QUADRATURE_POINTS", "MAX_DEFAULT_QUADRATURE_POINTS", "binder_quadrature",
-           "default_quadrature_points"]
+           "default_quadrature_points", "gauss_legendre_barycentric_weights"]
 
 #: Default number of Gauss points per interval (two intervals when n > 1), for |g| <= 0.8.
 DEFAULT_QUADRATURE_POINTS = 16
@@ -93,3 +93,30 @@ def binder_quadrature(n_points=DEFAULT_QUADRATURE_POINTS, n=1.45, extra_nodes=()
         mu, weight = _gauss(2 * n_points, 0.0, 1.0)
     extra = np.asarray(extra_nodes, dtype=float).ravel()
     return np.concatenate([mu, extra]), np.concatenate([weight, np.zeros(extra.size)])
+
+
+def gauss_legendre_barycentric_weights(n_points):
+    """Barycentric weights of the ``n_points`` Gauss-Legendre nodes (ascending, as
+    :func:`numpy.polynomial.legendre.leggauss` returns them).
+
+    ``w_j = (-1)^j sqrt((1 - x_j^2) lambda_j)`` with ``lambda_j`` the Gauss weights (Wang,
+    Huybrechs & Vandewalle 2014, Math. Comp. 83, eq. 3.2; up to a common factor, which the
+    barycentric formula of the second kind divides out, so they serve any affine image of the
+    nodes). Closed form, so every process gets the same bits: scipy's
+    :class:`~scipy.interpolate.BarycentricInterpolator` computes its weights from products in a
+    random order drawn from numpy's unseeded global generator, which made the rough tables (and
+    through them the chains of a seeded run) differ in the last bit between processes.
+
+    Parameters
+    ----------
+    n_points : int
+        Number of nodes, >= 1.
+
+    Returns
+    -------
+    numpy.ndarray
+        (n_points,) [-].
+    """
+    x, weight = np.polynomial.legendre.leggauss(n_points)
+    sign = np.where(np.arange(n_points) % 2 == 0, 1.0, -1.0)
+    return sign * np.sqrt((1.0 - x * x) * weight)

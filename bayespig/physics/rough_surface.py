@@ -76,7 +76,7 @@ from .microfacet import (
     transmission_modes,
 )
 from .phase import ModeStopping, n_fourier_modes, normalise_on_quadrature, phase_fourier_modes
-from .quadrature import binder_quadrature
+from .quadrature import binder_quadrature, gauss_legendre_barycentric_weights
 
 __all__ = ["FINEST_PANEL", "MODE_BLOCK", "PANEL_POINTS", "ROUGHNESS_MAX", "RoughInterface", "rough_interface",
            "rough_surface_terms"]
@@ -136,8 +136,9 @@ class _LagrangeBasis:
         self.mu_c = critical_cosine(n)
         x, _ = np.polynomial.legendre.leggauss(n_points)
         unit = 0.5 * (x + 1.0)
-        self.lower = BarycentricInterpolator(self.mu_c * unit, np.eye(n_points))
-        self.upper = BarycentricInterpolator(unit, np.eye(n_points))
+        weights = gauss_legendre_barycentric_weights(n_points)
+        self.lower = BarycentricInterpolator(self.mu_c * unit, np.eye(n_points), wi=weights)
+        self.upper = BarycentricInterpolator(unit, np.eye(n_points), wi=weights)
         mu_nodes = np.concatenate([self.mu_c * unit, self.mu_c + (1.0 - self.mu_c) * unit * unit])
         self.sine_nodes = np.sqrt(1.0 - mu_nodes * mu_nodes)
 

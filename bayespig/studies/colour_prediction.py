@@ -212,6 +212,20 @@ def _apart(study, model):
                and abs(np.log(p.thickness_per_card[0] / p.thickness_per_card[1])) > np.log(CARD_THICKNESS_FACTOR))
 
 
+def _convergence_row(study, model):
+    """Table row: how many of ``model``'s leave-one-out libraries were capped, and the median
+    ΔE00 (fitted thickness, both cards) of the films of converged and of capped builds."""
+    predictions = study.of(model)
+    capped = [p for p in predictions if not p.converged]
+    converged = [p for p in predictions if p.converged]
+
+    def median_of(group):
+        value = _median([d for p in group for d in p.delta_E])
+        return "—" if np.isnan(value) else f"{value:.2f} ({len(group)} film{'s' if len(group) != 1 else ''})"
+
+    return f"| {model} | {len(capped)} of {len(predictions)} | {median_of(converged)} | {median_of(capped)} |"
+
+
 def _per_card(rt, km):
     """``b / w (h_b, h_w)`` of both models' per-card predictions, for the film table."""
     def one(p):
@@ -269,7 +283,14 @@ def colour_prediction_report(study, *, command="bayespig colour-prediction"):
         lines.append(f"| {model} | {hits} / {total} | {hits / total:.0%} |")
     lo, hi = GOAL_COVERAGE
     lines += ["", f"Goal: between {lo:.0%} and {hi:.0%}.", ""]
-    lines += ["## Every film", "",
+    lines += ["## Convergence of the leave-one-out libraries", "",
+              ("A build is capped when any stage of its staged posterior reached the sampler's step cap "
+               "(`max_steps_reached`); its draws are then those of chains that may not have mixed."), "",
+              "| model | capped builds | median ΔE00, converged builds | median ΔE00, capped builds |",
+              "|---|---|---|---|"]
+    for model in (rt, km):
+        lines.append(_convergence_row(study, model))
+    lines += ["", "## Every film", "",
               "| film | class | recipe | bayespig ΔE00 black / white | KM ΔE00 black / white | bayespig h | "
               "per card: bayespig ΔE00 / KM ΔE00 (h black, white) | inside 90 % (bayespig) | worst band (bayespig) |",
               "|---|---|---|---|---|---|---|---|---|"]
