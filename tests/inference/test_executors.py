@@ -1,6 +1,7 @@
 """Executors: the samples do not depend on how the tasks run; the local pool's workers end
 with their parent (kill -9, Ctrl-C)."""
 
+import hashlib
 import os
 import signal
 import subprocess
@@ -45,6 +46,40 @@ def test_same_seed_identical_whatever_the_executor(method4_set, method4_idata):
                                       method4_idata.posterior[name].values)
     np.testing.assert_array_equal(pooled.posterior_predictive["y"].values,
                                   inline.posterior_predictive["y"].values)
+
+
+def test_same_seed_identical_in_another_process(method4_set, method4_idata):
+    """A seeded run repeated in a fresh Python process (another hash seed, other addresses) gives
+    the same draws bit for bit: nothing of the run depends on the process (the rough tables'
+    weights once did, tests/physics/test_rough_surface.py)."""
+    code = textwrap.dedent("""
+        import hashlib, sys
+        from bayespig.data import simulate
+        from bayespig.inference import InferenceSettings, infer
+        fast = InferenceSettings(**{k: int(v) if v.isdigit() else float(v) for k, v in
+                                    (item.split("=") for item in sys.argv[1:])})
+        data = simulate(a=[0.05, 0.1, 0.2], tau=[0.5, 1.0, 2.0], design="method4",
+                        wavelengths=[450.0, 550.0, 650.0], eps=0.05, seed=11)
+        idata = infer(data, seed=5, progress=False, settings=fast, executor=None)
+        print(hashlib.sha256(idata.posterior["a"].values.tobytes()).hexdigest())
+        """)
+    fields = ("n_walkers", "n_ensembles", "draws_per_chain", "target_ess")
+    arguments = [f"{name}={getattr(FAST, name)}" for name in fields]
+    done = subprocess.run([sys.executable, "-c", code, *arguments], capture_output=True, text=True, check=True,
+                          env={**os.environ, "PYTHONHASHSEED": "12345"})
+    here = hashlib.sha256(method4_idata.posterior["a"].values.tobytes()).hexdigest()
+    assert done.stdout.strip() == here
+
+
+def test_a_seeded_run_leaves_numpys_global_generator_alone():
+    """Every draw of a run comes from its seeded Generator: numpy's global stream (which a
+    library left to its defaults draws from, e.g. scipy's BarycentricInterpolator) is not used."""
+    one = simulate(a=0.05, tau=0.5, design="method4", wavelengths=[450.0], eps=0.05, seed=11)
+    np.random.seed(2024)
+    before = np.random.get_state()
+    infer(one, seed=5, progress=False, settings=FAST, executor=None)
+    after = np.random.get_state()
+    assert np.array_equal(before[1], after[1]) and before[2:] == after[2:]
 
 
 def test_dask_executor_gives_the_same_samples(method4_set, method4_idata):
