@@ -100,7 +100,10 @@ def gauss_legendre_barycentric_weights(n_points):
     :func:`numpy.polynomial.legendre.leggauss` returns them).
 
     ``w_j = (-1)^j sqrt((1 - x_j^2) lambda_j)`` with ``lambda_j`` the Gauss weights (Wang,
-    Huybrechs & Vandewalle 2014, Math. Comp. 83, eq. 3.2; up to a common factor, which the
+    Huybrechs & Vandewalle 2014, "Explicit barycentric weights for polynomial interpolation in
+    the roots or extrema of classical orthogonal polynomials", Math. Comp. 83, 2893; checked
+    against the definition ``1 / prod_{k != j} (x_j - x_k)`` in tests/physics/test_quadrature.py),
+    up to a common factor, which the
     barycentric formula of the second kind divides out, so they serve any affine image of the
     nodes). Closed form, so every process gets the same bits: scipy's
     :class:`~scipy.interpolate.BarycentricInterpolator` computes its weights from products in a
