@@ -103,9 +103,8 @@ def gauss_legendre_barycentric_weights(n_points):
     Huybrechs & Vandewalle 2014, "Explicit barycentric weights for polynomial interpolation in
     the roots or extrema of classical orthogonal polynomials", Math. Comp. 83, 2893; checked
     against the definition ``1 / prod_{k != j} (x_j - x_k)`` in tests/physics/test_quadrature.py),
-    up to a common factor, which the
-    barycentric formula of the second kind divides out, so they serve any affine image of the
-    nodes). Closed form, so every process gets the same bits: scipy's
+    up to a common factor, which the barycentric formula of the second kind divides out, so they
+    serve any affine image of the nodes. Closed form, so every process gets the same bits: scipy's
     :class:`~scipy.interpolate.BarycentricInterpolator` computes its weights from products in a
     random order drawn from numpy's unseeded global generator, which made the rough tables (and
     through them the chains of a seeded run) differ in the last bit between processes.
