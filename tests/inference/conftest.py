@@ -2,16 +2,14 @@
 
 import pytest
 
-from bayespig.data import simulate
 from bayespig.inference import infer
 
-from .common import FAST
+from .common import FAST, method4_data
 
 
 @pytest.fixture(scope="package")
 def method4_set():
-    return simulate(a=[0.05, 0.1, 0.2], tau=[0.5, 1.0, 2.0], design="method4",
-                    wavelengths=[450.0, 550.0, 650.0], eps=0.05, seed=11)
+    return method4_data()
 
 
 @pytest.fixture(scope="package")

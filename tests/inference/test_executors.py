@@ -9,6 +9,7 @@ import sys
 import textwrap
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -53,19 +54,14 @@ def test_same_seed_identical_in_another_process(method4_set, method4_idata):
     the same draws bit for bit: nothing of the run depends on the process (the rough tables'
     weights once did, tests/physics/test_rough_surface.py)."""
     code = textwrap.dedent("""
-        import hashlib, sys
-        from bayespig.data import simulate
-        from bayespig.inference import InferenceSettings, infer
-        fast = InferenceSettings(**{k: int(v) if v.isdigit() else float(v) for k, v in
-                                    (item.split("=") for item in sys.argv[1:])})
-        data = simulate(a=[0.05, 0.1, 0.2], tau=[0.5, 1.0, 2.0], design="method4",
-                        wavelengths=[450.0, 550.0, 650.0], eps=0.05, seed=11)
-        idata = infer(data, seed=5, progress=False, settings=fast, executor=None)
+        import hashlib
+        from bayespig.inference import infer
+        from tests.inference.common import FAST, method4_data
+        idata = infer(method4_data(), seed=5, progress=False, settings=FAST, executor=None)
         print(hashlib.sha256(idata.posterior["a"].values.tobytes()).hexdigest())
         """)
-    fields = ("n_walkers", "n_ensembles", "draws_per_chain", "target_ess")
-    arguments = [f"{name}={getattr(FAST, name)}" for name in fields]
-    done = subprocess.run([sys.executable, "-c", code, *arguments], capture_output=True, text=True, check=True,
+    root = Path(__file__).resolve().parents[2]
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=root,
                           env={**os.environ, "PYTHONHASHSEED": "12345"})
     here = hashlib.sha256(method4_idata.posterior["a"].values.tobytes()).hexdigest()
     assert done.stdout.strip() == here
