@@ -107,6 +107,25 @@ class PigmentLibrary:
         return (f"PigmentLibrary({self.model!r}, {len(self.pigments)} pigments, {len(self.film_ids)} films, "
                 f"{self.constants.shape[0]} draws, {self.wavelength_nm.size} wavelengths)")
 
+    def step_cap_reached(self, *, inherited=True):
+        """Whether a stage of the library's staged posterior reached its sampler's step cap.
+
+        Parameters
+        ----------
+        inherited : bool
+            Count the stages inherited from the base library it was built on
+            (``provenance["base_library"]``: stages whose pigments are all the base's); with
+            False only the library's own stages.
+
+        Returns
+        -------
+        bool
+        """
+        base = self.provenance.get("base_library")
+        base_pigments = set(base["pigments"]) if base and not inherited else None
+        return any(stage.get("max_steps_reached") for stage in self.stages
+                   if base_pigments is None or not set(stage.get("pigments", ())) <= base_pigments)
+
     def to_inference_data(self):
         """The library as an :class:`arviz.InferenceData` (what :meth:`save` writes)."""
         import arviz as az

@@ -96,7 +96,8 @@ class FilmPrediction:
     match_delta_E : float
     seconds : float
     converged : bool
-        No stage of its library reached the step cap.
+        No stage of its library reached the step cap (its own stages and those of the base
+        library it was built on).
     worst_band_nm : float
         Band of the largest relative residual.
     thickness_per_card, delta_E_per_card : tuple of float
@@ -106,6 +107,9 @@ class FilmPrediction:
         which no single thickness gives). A bound on what thickness can explain rather than a
         measurement of it: on Revigo the two differ by more than a factor 2 for 43 of 54 films
         (:mod:`bayespig.studies.colour_prediction`), where they absorb a model error.
+    own_stages_converged : bool
+        No stage of its library's own reached the step cap (the stages inherited from the base
+        library, ``provenance["base_library"]``, which every build of a study shares, excluded).
     """
 
     film_id: str
@@ -125,6 +129,7 @@ class FilmPrediction:
     worst_band_nm: float
     thickness_per_card: tuple = ()
     delta_E_per_card: tuple = ()
+    own_stages_converged: bool = True
 
 
 def card_spectra(measurements):
@@ -252,11 +257,11 @@ def predict_held_out(library, measurements, recipe, *, model, film_id, seed=0, n
         match = match_paint(library, values, pigments=tuple(recipe.amounts), instrument=instrument, thickness="fit",
                             substrate=card, seed=seed, n_spread=0, n_draws=50)
         fractions, match_dE = dict(match.recipe.amounts), match.delta_E
-    capped = any(stage.get("max_steps_reached") for stage in library.stages)
     return FilmPrediction(film_id, model, dict(recipe.amounts), tuple(name for name, _, _ in pairs), h, tuple(dE),
                           tuple(dE_unknown), residuals, spectra, measured, fractions,
-                          match_dE, time.perf_counter() - started, not capped,
-                          float(wl[np.argmax(np.abs(residuals).max(axis=0))]), tuple(h_card), tuple(dE_card))
+                          match_dE, time.perf_counter() - started, not library.step_cap_reached(),
+                          float(wl[np.argmax(np.abs(residuals).max(axis=0))]), tuple(h_card), tuple(dE_card),
+                          not library.step_cap_reached(inherited=False))
 
 
 def _predict_film(task):

@@ -213,17 +213,30 @@ def _apart(study, model):
 
 
 def _convergence_row(study, model):
-    """Table row: how many of ``model``'s leave-one-out libraries were capped, and the median
-    ΔE00 (fitted thickness, both cards) of the films of converged and of capped builds."""
+    """Table row: how many of ``model``'s leave-one-out libraries were capped in any stage and in
+    their own stages (the shared base library's excluded), and the median ΔE00 (fitted thickness,
+    both cards) of the films whose own stages converged and of those whose own stages were capped."""
     predictions = study.of(model)
     capped = [p for p in predictions if not p.converged]
-    converged = [p for p in predictions if p.converged]
+    own_capped = [p for p in predictions if not p.own_stages_converged]
+    own_converged = [p for p in predictions if p.own_stages_converged]
 
     def median_of(group):
         value = _median([d for p in group for d in p.delta_E])
         return "—" if np.isnan(value) else f"{value:.2f} ({len(group)} film{'s' if len(group) != 1 else ''})"
 
-    return f"| {model} | {len(capped)} of {len(predictions)} | {median_of(converged)} | {median_of(capped)} |"
+    n = len(predictions)
+    return (f"| {model} | {len(capped)} of {n} | {len(own_capped)} of {n} | {median_of(own_converged)} | "
+            f"{median_of(own_capped)} |")
+
+
+def _convergence_remark(prediction):
+    """What the worst-film list says of a film's library when a stage was capped ('' when none was)."""
+    if not prediction.own_stages_converged:
+        return "; its library did not converge (its own stages reached the step cap)"
+    if not prediction.converged:
+        return "; only the shared base stage of its library reached the step cap"
+    return ""
 
 
 def _per_card(rt, km):
@@ -285,9 +298,13 @@ def colour_prediction_report(study, *, command="bayespig colour-prediction"):
     lines += ["", f"Goal: between {lo:.0%} and {hi:.0%}.", ""]
     lines += ["## Convergence of the leave-one-out libraries", "",
               ("A build is capped when any stage of its staged posterior reached the sampler's step cap "
-               "(`max_steps_reached`); its draws are then those of chains that may not have mixed."), "",
-              "| model | capped builds | median ΔE00, converged builds | median ΔE00, capped builds |",
-              "|---|---|---|---|"]
+               "(`max_steps_reached`); its draws are then those of chains that may not have mixed. Every build "
+               "of a series shares the stages of its base library (zinc white and bone black, from the films "
+               "of series 07 not held out); the third column counts the builds capped in their own stages "
+               "(the held-out film's pigments), and the medians split the films by that."), "",
+              "| model | capped builds (any stage) | capped in their own stages | median ΔE00, own stages "
+              "converged | median ΔE00, own stages capped |",
+              "|---|---|---|---|---|"]
     for model in (rt, km):
         lines.append(_convergence_row(study, model))
     lines += ["", "## Every film", "",
@@ -311,7 +328,7 @@ def colour_prediction_report(study, *, command="bayespig colour-prediction"):
         side = ["darker than predicted" if s < 0 else "lighter than predicted" for s in sign]
         lines.append(f"- **{p.film_id}** ({study.classes.get(p.film_id)}, ΔE00 {p.delta_E[0]:.2f} / {p.delta_E[1]:.2f}): the largest "
                      f"relative residual at {band:g} nm (over black {side[0]}, over white {side[1]}); fitted thickness "
-                     f"{p.thickness:.3g}{'; its library did not converge' if not p.converged else ''}.")
+                     f"{p.thickness:.3g}{_convergence_remark(p)}.")
     lines += ["", "## Matching", "",
               "Each target matched from its leave-one-out library with its own pigments allowed (target: its "
               "over-white spectrum; thickness fitted).", "",
