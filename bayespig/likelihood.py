@@ -579,6 +579,17 @@ class ForwardModel:
         self._stencils = {}
 
     @property
+    def table_checksums(self):
+        """Key -> content checksum (SHA-256 of the tabulated arrays) of every table the films use,
+        the binder-index families included: what saved results record next to
+        :attr:`table_keys`, so that two runs can be told to have used the same numbers (the key
+        says the settings were the same; tables rebuilt on another CPU may still differ in the
+        last bits, and seeded chains with them)."""
+        tables = [t for t in self._film_tables if t is not None]
+        tables += list(getattr(self, "binder_index_tables", {}).values())
+        return {t.key: t.checksum for t in sorted(tables, key=lambda t: t.key)}
+
+    @property
     def rough(self):
         """Whether the films' surface is rough (``roughness > 0``: the rough-surface tables)."""
         return self.roughness > 0.0

@@ -59,6 +59,7 @@ hashing the instrument, the settings (roughness axis included) and the package v
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import os
@@ -331,6 +332,10 @@ class RoughLookupTable:
     instrument : Instrument
     settings : RoughTableSettings
     key : str
+        Hash of everything that changes the numbers (cache key, recorded in results).
+    checksum : str
+        SHA-256 of :attr:`arrays` (the cache file's checksum; recorded in results next to the
+        key, as :attr:`bayespig.table.LookupTable.checksum`).
     arrays : dict of numpy.ndarray
         ``log_q`` (n_alpha, n_a, n_columns): log of the body over ``1 - a`` per distinct body
         value (:func:`body_columns`); ``lobe`` (n_alpha, K): the hemispherical channels'
@@ -366,6 +371,11 @@ class RoughLookupTable:
         self._mu_i = np.cos(np.radians([c.theta_i for c in ch]))
         self._mu_o = np.cos(np.radians([c.theta_o for c in ch]))
         self._cos_psi = np.cos(np.radians([c.delta_phi for c in ch]) - np.pi)
+
+    @functools.cached_property
+    def checksum(self):
+        """SHA-256 of :attr:`arrays` (hex), as the cache file records it."""
+        return _checksum(self.arrays)
 
     def __repr__(self):
         return (f"RoughLookupTable({self.instrument.name!r}, {len(self.channels)} channels, opaque, "
@@ -512,6 +522,11 @@ class FixedRoughnessTable:
         self.tau_min, self.tau_max = float(self.settings.tau_nodes[0]), float(self.settings.tau_nodes[-1])
         self._lobe = rough.lobe(np.array([roughness]))[0]
 
+    @property
+    def checksum(self):
+        """The rough table's :attr:`RoughLookupTable.checksum` (the roughness is in :attr:`key`)."""
+        return self.rough.checksum
+
     def __repr__(self):
         return f"FixedRoughnessTable({self.rough!r}, roughness={self.roughness:g})"
 
@@ -610,6 +625,11 @@ class BinderIndexRoughTables:
         self.n_min, self.n_max = float(nodes[0]), float(nodes[-1])
         self._n0, self._dn = float(nodes[0]), float(step.mean())
         self.key = hashlib.sha256(" ".join(t.key for t in tables).encode()).hexdigest()[:32]
+
+    @functools.cached_property
+    def checksum(self):
+        """SHA-256 (hex) of the node tables' checksums in node order."""
+        return hashlib.sha256(" ".join(t.checksum for t in self.tables).encode()).hexdigest()
 
     def __repr__(self):
         return (f"BinderIndexRoughTables({self.instrument.name!r}, {self.n_channels} channels, n in "
@@ -798,7 +818,9 @@ def read_rough_table(path, instrument, settings):
         raise CacheError(f"cached table {path} was built with other settings (key {stored_key} != {key})")
     if stored_sum != _checksum(arrays):
         raise CacheError(f"cached table {path} is corrupt (checksum mismatch)")
-    return RoughLookupTable(instrument, settings, arrays, key)
+    table = RoughLookupTable(instrument, settings, arrays, key)
+    table.checksum = stored_sum  # verified above: not hashed again
+    return table
 
 
 def load_rough_table(instrument, *, n=1.45, settings=None, cache_dir=None, rebuild=False, progress=True,

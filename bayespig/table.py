@@ -23,6 +23,7 @@ yields every node (adding–doubling produces ``R(2^k d)`` for free).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import os
@@ -561,6 +562,10 @@ class LookupTable:
     settings : TableSettings
     key : str
         Hash of everything that changes the numbers (cache key, recorded in results).
+    checksum : str
+        SHA-256 of the tabulated arrays (their names and bytes; the cache file's checksum),
+        recorded in results next to the key: two runs with the same checksum used the same
+        numbers, bit for bit (a table rebuilt on another CPU may differ in the last bits).
     arrays : dict of numpy.ndarray
         The tabulated arrays ``log_q``, ``log_d``, ``log_u`` (n_g, n_a, n_tau + 2, K)
         and ``r_up`` (n_g, n_a, n_tau + 2); tau index 0 is the ``tau -> 0`` limit,
@@ -607,6 +612,11 @@ class LookupTable:
             if ch.kind == "hemispherical" and ch.specular == "included" else 0.0
             for ch in instrument.channels
         ])
+
+    @functools.cached_property
+    def checksum(self):
+        """SHA-256 of :attr:`arrays` (hex), as the cache file records it."""
+        return _checksum(self.arrays)
 
     @property
     def free_g(self):
@@ -839,6 +849,7 @@ class LookupTable:
 
 
 def _checksum(arrays):
+    """SHA-256 (hex) of named arrays: every name and the array's bytes, in sorted name order."""
     digest = hashlib.sha256()
     for key in sorted(arrays):
         digest.update(key.encode())
@@ -992,7 +1003,9 @@ def read_table(path, instrument, settings):
         raise CacheError(f"cached table {path} was built with other settings (key {stored_key} != {key})")
     if stored_sum != _checksum(arrays):
         raise CacheError(f"cached table {path} is corrupt (checksum mismatch)")
-    return LookupTable(instrument, settings, arrays, key)
+    table = LookupTable(instrument, settings, arrays, key)
+    table.checksum = stored_sum  # verified above: not hashed again
+    return table
 
 
 def _table_title(instrument):

@@ -643,6 +643,22 @@ def test_cache_file_loads_back_identical(small_cache):
     assert_same_arrays(table.arrays, cached.arrays)
 
 
+def test_the_checksum_is_of_the_tables_contents(small_cache):
+    table, path = small_cache
+    with np.load(path, allow_pickle=False) as data:
+        stored = str(data["__checksum__"])
+    loaded = read_table(path, list(SMALL_INSTRUMENT), SMALL_SETTINGS)
+    # built, cached and read back: one checksum (the read one is the file's, verified)
+    assert table.checksum == stored == loaded.checksum
+    # a fresh build has the same numbers, so the same checksum
+    assert build_table(list(SMALL_INSTRUMENT), SMALL_SETTINGS, progress=False).checksum == stored
+    # one number changed in the last bit: another checksum, the key unchanged
+    arrays = {k: v.copy() for k, v in table.arrays.items()}
+    arrays["log_q"].flat[7] = np.nextafter(arrays["log_q"].flat[7], np.inf)
+    other = LookupTable(table.instrument, table.settings, arrays, table.key)
+    assert other.checksum != stored and other.key == table.key
+
+
 def test_build_is_deterministic(small_cache):
     table, _ = small_cache
     assert_same_arrays(

@@ -102,6 +102,17 @@ def test_cache_is_read_back_and_its_key_includes_the_roughness_axis(table, priva
     assert rough_table_key(INSTRUMENT, other) != table.key
 
 
+def test_the_content_checksum_is_the_cache_file_s_and_shared_by_its_fixed_roughness_tables(table,
+                                                                                           private_table_cache):
+    with np.load(private_table_cache / f"rough-table-{table.key}.npz", allow_pickle=False) as data:
+        stored = str(data["__checksum__"])
+    assert table.checksum == stored == load_rough_table(INSTRUMENT, progress=False).checksum
+    assert len(stored) == 64 and int(stored, 16) >= 0  # SHA-256, hex
+    # the roughness of a fixed-roughness table is in its key; its numbers are the rough table's
+    fixed = FixedRoughnessTable(table, 0.05)
+    assert fixed.checksum == table.checksum and fixed.key != table.key
+
+
 def test_out_of_range_roughness_and_finite_films_are_refused(table):
     with pytest.raises(ValueError, match=r"^roughness must lie in the table's range \[0\.01, 1\]$"):
         table(a=0.2, roughness=1.5)

@@ -119,7 +119,9 @@ e.g. ``45as15``, ``sci``; ``specular_transmittance`` for a film on glass), ``kin
 Attributes (on the InferenceData and on every group): ``bayespig_version``,
 ``numpy_version``, ``scipy_version``, ``emcee_version``, ``arviz_version``, ``seed``,
 ``method``, ``g``, ``eps_mode`` (``known``/``inferred``), ``settings`` (JSON), ``priors``
-(JSON of :meth:`Priors.describe`), ``table_keys`` (JSON list), ``instruments`` (JSON: name ->
+(JSON of :meth:`Priors.describe`), ``table_keys`` (JSON list), ``table_checksums`` (JSON: key
+-> SHA-256 of the table's arrays; the same checksum is the same numbers, bit for bit),
+``instruments`` (JSON: name ->
 channel labels), ``n`` (binder index), ``parameter_names`` (JSON), ``created`` (UTC ISO time),
 ``sampling_wall_time_s``, ``substrate_factors`` (JSON; null without card factors),
 ``noise_floor_mode`` (``none``/``known``/``inferred``), ``noise_floor`` (the known floor; 0 for

@@ -17,6 +17,7 @@ from bayespig.inference import (
     summarize,
 )
 from bayespig.likelihood import Priors
+from bayespig.table import table_path
 
 from .common import FAST, MC_Z
 
@@ -73,6 +74,11 @@ def test_inference_data_schema(method4_idata, method4_set):
     assert json.loads(post.attrs["settings"])["n_walkers"] == 16
     assert "log-uniform" in json.loads(post.attrs["priors"])["tau"]
     assert len(json.loads(post.attrs["table_keys"])) == 1
+    checksums = json.loads(post.attrs["table_checksums"])
+    assert list(checksums) == json.loads(post.attrs["table_keys"])
+    for key, checksum in checksums.items():  # the cache file's own record of the table's contents
+        with np.load(table_path(key), allow_pickle=False) as data:
+            assert checksum == str(data["__checksum__"])
     assert post.attrs["n"] == 1.45
 
 
