@@ -726,6 +726,7 @@ def _fit_group(task):
         "concentration_labels": () if concentration_spec is None else tuple(
             zip(concentration_spec.films, concentration_spec.pigments)),
         "concentration_factors": concentration_draws,
+        "table_checksums": film_model.table_checksums,
         "diagnostics": {
             "stage": task["stage"], "pigments": list(task["pigments"]), "films": list(task["films"]),
             "n_steps": int(run["n_steps"]), "max_steps_reached": bool(run["max_steps_reached"]),
@@ -1013,6 +1014,8 @@ def _assemble(film_model, results, recipes, unused, wavelength_nm, seed, setting
                                                    "films": [f["id"] for f in base.films if f.get("used")],
                                                    "provenance": base.provenance},
         "method": "staged (cut) posterior, bayespig.library.build",
+        # the look-up tables of every stage (key -> SHA-256 of their arrays; a base's are its own record)
+        "table_checksums": dict(sorted({k: v for r in results for k, v in r.get("table_checksums", {}).items()}.items())),
     }
     if substrate_sd is not None:  # absent otherwise: a build without card factors is recorded as before
         provenance["substrate_sd"] = float(substrate_sd)

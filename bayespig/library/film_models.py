@@ -258,6 +258,12 @@ class FilmModel(abc.ABC):
     def __repr__(self):
         return f"{type(self).__name__}(lower={self.lower.tolist()}, upper={self.upper.tolist()})"
 
+    @property
+    def table_checksums(self):
+        """Key -> content checksum of every look-up table the model has used so far (none for a
+        model without tables); recorded in a library's provenance."""
+        return {}
+
     @abc.abstractmethod
     def physical(self, constants):
         """The physical constants from the sampled coordinates ``constants`` (..., 2) (dict of arrays)."""
@@ -325,6 +331,11 @@ class RadiativeTransferModel(FilmModel):
         for key, table in (tables or {}).items():
             instrument = key if isinstance(key, Instrument) else get_instrument(key)
             self._tables[(instrument.channels, instrument.n)] = table
+
+    @property
+    def table_checksums(self):
+        """Key -> :attr:`bayespig.table.LookupTable.checksum` of every table used so far."""
+        return {t.key: t.checksum for t in sorted(self._tables.values(), key=lambda t: t.key)}
 
     def table(self, instrument):
         """The isotropic look-up table of ``instrument`` (an Instrument), cached per channels and ``n``."""

@@ -66,7 +66,8 @@ class PigmentLibrary:
         calibration factor (``provenance["model_error"]["calibration"]``), or a per-wavelength
         relative sd (n_wl,); None until then (predictions then hold the constants' uncertainty only).
     provenance : dict
-        Seed, settings, package versions, stage plan.
+        Seed, settings, package versions, stage plan, the look-up tables used (``table_checksums``:
+        key -> SHA-256 of their arrays).
     stages : tuple of dict
         Per stage group: pigments, films, steps, cap, R-hat and ESS of thicknesses and constants
         (and of the card factors when sampled).

@@ -17,7 +17,7 @@ from bayespig.inference.shared import MAX_ADAPTATION_ROUNDS
 from bayespig.library import PigmentLibrary, build_library, load_library, stage_plan
 from bayespig.library.build import IMPLAUSIBLE_SDS, implausible_factor
 from bayespig.library.recipes import Recipe
-from bayespig.table import load_table
+from bayespig.table import load_table, table_path
 
 WAVELENGTHS = np.array([450.0, 550.0, 650.0])
 EPS = 0.01
@@ -599,3 +599,13 @@ def test_an_unknown_noise_scale_is_refused_before_any_work(simulated):
 
 def test_the_noise_scale_is_recorded(library):
     assert library.provenance["noise_scale"] == "measured"
+
+
+def test_the_library_records_the_contents_of_the_tables_it_was_fitted_with(library, default_builds):
+    # the simulated films are 8d-sce films: the radiative-transfer stages used that one table
+    table = load_table("8d-sce", progress=False)
+    assert library.provenance["table_checksums"] == {table.key: table.checksum}
+    with np.load(table_path(table.key), allow_pickle=False) as data:
+        assert table.checksum == str(data["__checksum__"])
+    # Kubelka-Munk has no look-up tables
+    assert default_builds("kubelka-munk")[2].provenance["table_checksums"] == {}
