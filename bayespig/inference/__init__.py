@@ -110,7 +110,11 @@ of the measured values at one wavelength, films concatenated in problem order), 
     ``lp`` (chain, draw, wavelength): log posterior (= log-likelihood plus a constant);
     ``acceptance_rate`` (chain, wavelength); ``autocorr_time`` (wavelength, parameter) in
     steps; ``n_steps``, ``n_burn_in`` (wavelength); ``thinning`` (wavelength): steps between
-    stored draws; ``max_steps_reached`` (wavelength, 0/1).
+    stored draws; ``max_steps_reached`` (wavelength, 0/1); ``adaptation_rounds`` (wavelength):
+    the joint sampler's adaptation runs before its run proper (0 for a per-wavelength run);
+    ``shared_acceptance`` (wavelength): the share of the joint sampler's proposals of the
+    parameters shared over wavelengths that were accepted (NaN for a per-wavelength run; a few
+    per cent means the shared parameters crawl, :mod:`bayespig.inference.shared`).
 
 Non-dimension coordinates along ``value``: ``sample`` (film name), ``channel`` (channel label,
 e.g. ``45as15``, ``sci``; ``specular_transmittance`` for a film on glass), ``kind``

@@ -75,6 +75,9 @@ class FilmThickness(SharedParameter):
     coordinate_name = "log_film_thickness"
     attribute = "film_thickness_prior"
     prior_scale = "log"
+    #: Drawn from the prior as well (:attr:`~bayespig.inference.shared.SharedParameter.prior_proposals`):
+    #: a film that hides its cards bounds its thickness only from below.
+    prior_proposals = True
 
     def __init__(self, films, measured=None, relative_sd=RELATIVE_SD, measured_sd=MEASURED_RELATIVE_SD, start=None):
         films = tuple(str(f) for f in films)
@@ -109,6 +112,16 @@ class FilmThickness(SharedParameter):
             margin = 1e-3 * self.sd
             self.nominal = np.clip(start, self.lower + margin, self.upper - margin)
         self.start_sd = 0.01 * self.sd
+
+    @property
+    def prior_mean(self):
+        """Mean of every film's normal prior of ``log h``."""
+        return self.mean
+
+    @property
+    def prior_sd(self):
+        """Sd of every film's normal prior of ``log h``."""
+        return self.sd
 
     def log_prior(self, x):
         """Normal in ``log h`` (up to a constant), (W,)."""

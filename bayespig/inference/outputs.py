@@ -233,6 +233,8 @@ def _inference_data(problem, model, results, settings, log_post0, fit, *, seed, 
         "max_steps_reached": (("wavelength",), np.array([int(r["max_steps_reached"]) for r in results])),
         # runs of the joint sampler's adaptation before its run proper (0: a per-wavelength run)
         "adaptation_rounds": (("wavelength",), np.array([int(r.get("adaptation_rounds", 0)) for r in results])),
+        # share of the joint sampler's shared-block proposals accepted (NaN: a per-wavelength run)
+        "shared_acceptance": (("wavelength",), np.array([float(r.get("shared_acceptance", np.nan)) for r in results])),
     }
     for spec, (_, autocorr) in shared:
         sample_stats[f"{spec.variable}_autocorr_time"] = ((spec.dimension,), autocorr)

@@ -229,6 +229,8 @@ START_BALL_SD = 0.01
 LEAST_SQUARES_STARTS = ((0.01, 3.0), (0.3, 30.0), (0.001, 300.0), (0.6, 3.0))
 #: Most residual evaluations of the joint least-squares start (:func:`joint_least_squares_start`).
 JOINT_START_NFEV = 400
+#: Coordinates named in each stage record's ``slowest_coordinates``.
+SLOWEST_REPORTED = 5
 #: Points of the start ball (draws of :func:`~bayespig.inference.shared.sample_blocks`).
 START_POINTS = 64
 #: A card factor whose whole 90 % interval lies beyond this many prior sds of ``log f`` is
@@ -317,6 +319,17 @@ class LibraryLayout(BlockLayout):
             self.scale_slices.append(slice(scale_start, scale_start + p.n_reflectance_films))
             start += p.observed.shape[1]
             scale_start += p.n_reflectance_films
+
+    @property
+    def scale_symmetry(self):
+        """``(block mask, "film_thickness")``: the values depend on ``log h`` and the film model's
+        log-linear coordinates (:attr:`~bayespig.library.film_models.FilmModel.log_linear`) only
+        through their sum (``tau = h sum_i D_i sigma_i``; Kubelka-Munk ``K h``, ``S h``), see
+        :attr:`bayespig.inference.shared.JointLogPosterior.scale_direction`. None when pigments of
+        an earlier stage are fixed: their constants do not follow, so the symmetry is broken."""
+        if self.fixed.shape[1]:
+            return None
+        return np.tile(np.asarray(self.film_model.log_linear, dtype=float), len(self.fitted)), "film_thickness"
 
     def constants(self, theta):
         """Every pigment's constants (W, n_wl, n_fitted + n_fixed, 2) from blocks (W, n_wl, k)."""
@@ -731,6 +744,14 @@ def _fit_group(task):
             "stage": task["stage"], "pigments": list(task["pigments"]), "films": list(task["films"]),
             "n_steps": int(run["n_steps"]), "max_steps_reached": bool(run["max_steps_reached"]),
             "adaptation_rounds": int(run["adaptation_rounds"]),
+            "shared_acceptance": float(run["shared_acceptance"]), "block_acceptance": float(run["block_acceptance"]),
+            # None where the step does not apply (a later stage: its fixed pigments break the symmetry)
+            **{key: (None if np.isnan(run[key]) else float(run[key]))
+               for key in ("scale_acceptance", "prior_proposal_acceptance")},
+            # the coordinates (of the sampler's residual coordinates) with the longest
+            # autocorrelation times [steps]: what the run-length rule waits for
+            "slowest_coordinates": [[joint.parameter_names[i], float(run["autocorr_time"][i])]
+                                    for i in np.argsort(run["autocorr_time"])[::-1][:SLOWEST_REPORTED]],
             "n_walkers": int(used.n_walkers), "n_ensembles": int(used.n_ensembles),
             "thickness_rhat_max": float(rhat_h.max()), "thickness_ess_min": float(ess_h.min()),
             "constants_rhat_max": float(rhat_c.max()), "constants_ess_min": float(ess_c.min()),

@@ -99,6 +99,9 @@ def test_the_joint_sampler_runs_any_list_of_specs(film):
     rounds = idata.sample_stats["adaptation_rounds"].values
     assert rounds.shape == (problem.n_wavelengths,) and len(set(rounds)) == 1
     assert 1 <= rounds[0] <= MAX_ADAPTATION_ROUNDS
+    # the share of shared-block proposals accepted: one value for the joint run, a proper share
+    shared_acceptance = idata.sample_stats["shared_acceptance"].values
+    assert len(set(shared_acceptance)) == 1 and 0.0 < shared_acceptance[0] < 1.0
     draws = post["unseen"].values[..., 0]
     ess = float(az.ess(draws))
     prior = stats.truncnorm(-TRUNCATION, TRUNCATION, scale=UNSEEN_SD)

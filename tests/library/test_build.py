@@ -15,7 +15,7 @@ from bayespig.data.simulate import FilmSpec
 from bayespig.inference import InferenceSettings
 from bayespig.inference.shared import MAX_ADAPTATION_ROUNDS
 from bayespig.library import PigmentLibrary, build_library, load_library, stage_plan
-from bayespig.library.build import IMPLAUSIBLE_SDS, implausible_factor
+from bayespig.library.build import IMPLAUSIBLE_SDS, SLOWEST_REPORTED, implausible_factor
 from bayespig.library.recipes import Recipe
 from bayespig.table import load_table, table_path
 
@@ -171,6 +171,9 @@ def test_the_library_recovers_known_constants(library, simulated):
         assert not stage["max_steps_reached"]
         assert stage["thickness_rhat_max"] <= 1.01 and stage["thickness_ess_min"] >= 400
         assert 1 <= stage["adaptation_rounds"] <= MAX_ADAPTATION_ROUNDS
+        assert 0.0 < stage["shared_acceptance"] < 1.0 and 0.0 < stage["block_acceptance"] < 1.0
+        taus = [tau for _, tau in stage["slowest_coordinates"]]
+        assert len(taus) == SLOWEST_REPORTED and taus == sorted(taus, reverse=True) and taus[-1] > 0
     low, high = np.quantile(library.thickness, [0.05, 0.95], axis=0)
     truth = np.array([truth_h[f] for f in library.film_ids])
     assert ((low <= truth) & (truth <= high)).sum() >= stats.binom(truth.size, COVERAGE).ppf(COVERAGE_QUANTILE)
