@@ -70,6 +70,16 @@ def _stage_of(library, pigment):
     return {}
 
 
+def _slowest_sentence(slowest):
+    """Where a capped stage lost its time: the sampler coordinates with the longest integrated
+    autocorrelation times (``[name, steps]`` pairs of the stage record's
+    ``slowest_coordinates``; ``r_`` marks a per-wavelength constant's residual coordinate)."""
+    named = ", ".join(f"{re.sub(r'^r_', '', str(name))} ({float(tau):.0f})" for name, tau in slowest)
+    return ("Slowest to mix (integrated autocorrelation time in steps; the run-length rule waits for "
+            "`min_autocorr_multiple`, by default 50, of them): "
+            f"{named}. A longer run (`max_steps`) or a film that pins these down helps.")
+
+
 def pigment_report(library, pigment):
     """Files of one pigment's report: relative path -> content (Markdown, PNG bytes, CSV)."""
     constants = pigment_constants(library, pigment)
@@ -107,6 +117,8 @@ def pigment_report(library, pigment):
                   f"{stage.get('thickness_ess_min', np.nan):.0f} (thicknesses)"
                   + (f"; card factors R-hat <= {stage['card_factor_rhat_max']:.3f}, ESS >= "
                      f"{stage['card_factor_ess_min']:.0f}" if "card_factor_rhat_max" in stage else "") + ".", ""]
+        if stage.get("max_steps_reached") and stage.get("slowest_coordinates"):
+            lines += [_slowest_sentence(stage["slowest_coordinates"]), ""]
     lines += [f"![constants]({name}.png)", "", "## Constants (median and 90 % interval)", "",
               "| wavelength [nm] | " + " | ".join(label for label, _, _ in constants) + " | correlation |",
               "|---|---|---|---|"]

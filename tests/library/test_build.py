@@ -350,6 +350,28 @@ def test_card_factors_are_saved_and_reported(carded, tmp_path):
     assert "card factors R-hat <=" in text and "substrate_sd 0.1" in text
 
 
+def test_the_report_of_a_capped_stage_names_its_slowest_coordinates(carded):
+    """A pigment fitted in a stage that hit its step cap: its report says so and names the
+    coordinates the run-length rule waited for, with their autocorrelation times; a stage
+    that converged names none."""
+    import copy
+
+    from bayespig.report.pigment import pigment_report
+
+    _, library = carded
+    capped = copy.deepcopy(library)
+    for stage in capped.stages:
+        stage["max_steps_reached"] = True
+        stage["slowest_coordinates"] = [["r_log_sigma[White][500]", 90.4], ["log_h[W]", 71.0]]
+    text = pigment_report(capped, "White")["White.md"]
+    assert "(capped: NOT converged)" in text
+    assert "Slowest to mix" in text and "log_sigma[White][500] (90), log_h[W] (71)." in text
+    for stage in capped.stages:
+        stage["max_steps_reached"] = False
+    text = pigment_report(capped, "White")["White.md"]
+    assert "(capped: NOT converged)" not in text and "Slowest to mix" not in text
+
+
 @pytest.fixture(scope="module")
 def default_builds(simulated):
     """``model -> (films, options, library)``: the base films built with the default options,
