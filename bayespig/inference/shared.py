@@ -279,7 +279,12 @@ class BlockLayout(abc.ABC):
         default coordinate-major (``j * n_wavelengths + i``).
     parameter_names : tuple of str
         Names of the flat residual coordinates (default ``r_<name>[<wavelength>]``).
+    scale_symmetry : tuple or None
+        ``(block mask (k,), spec variable)`` of an exact scale symmetry of the values
+        (:attr:`JointLogPosterior.scale_direction`); None (default) without one.
     """
+
+    scale_symmetry = None
 
     @property
     def n_wavelengths(self):
@@ -630,6 +635,17 @@ class JointLogPosterior:
         return np.concatenate(columns), np.concatenate(mean), np.concatenate(sd)
 
     @functools.cached_property
+    def _scale_symmetry(self):
+        """``(block mask, spec, spec's slice of phi)`` of the layout's ``scale_symmetry``, None
+        without one or without its spec among the sampled ones."""
+        symmetry = self.layout.scale_symmetry
+        if symmetry is None:
+            return None
+        mask, variable = symmetry
+        return next(((mask, spec, part) for spec, part in zip(self.specs, self.spec_slices)
+                     if spec.variable == variable), None)
+
+    @functools.cached_property
     def scale_direction(self):
         """Direction in ``u`` of the layout's exact scale symmetry, (n_dim,), or None.
 
@@ -640,13 +656,10 @@ class JointLogPosterior:
         value unchanged. In ``u`` the shift of ``phi`` also moves the blocks by ``S delta``,
         which ``r`` takes back.
         """
-        symmetry = getattr(self.layout, "scale_symmetry", None)
+        symmetry = self._scale_symmetry
         if symmetry is None:
             return None
-        mask, variable = symmetry
-        part = next((p for spec, p in zip(self.specs, self.spec_slices) if spec.variable == variable), None)
-        if part is None:
-            return None
+        mask, _, part = symmetry
         d_phi = np.zeros(self.n_shared)
         d_phi[part] = 1.0
         d_theta = -self._flat(np.broadcast_to(np.asarray(mask, dtype=float), (self.n_wavelengths, self.block_size)))
@@ -658,10 +671,9 @@ class JointLogPosterior:
         of the symmetry's shared coordinates, ``(sum_j sd_j^-2)^-1/2`` (what bounds the common
         scale when the data do not; 2.38: the optimal one-dimensional random walk, Roberts et
         al. 1997). None without the symmetry."""
-        symmetry = getattr(self.layout, "scale_symmetry", None)
-        if self.scale_direction is None:
+        if self._scale_symmetry is None:
             return None
-        spec = next(spec for spec in self.specs if spec.variable == symmetry[1])
+        spec = self._scale_symmetry[1]
         sd = np.broadcast_to(np.asarray(spec.prior_sd, dtype=float), (spec.size,))
         return float(2.38 / np.sqrt(np.sum(sd ** -2.0)))
 
@@ -743,7 +755,7 @@ class BlockwiseMove:
     cards, so their thicknesses are bounded only from below, and the common scale of the
     thicknesses and extinctions only by the thickness prior): with steps 1-2 alone 3.6 % of the
     shared proposals were accepted and the thicknesses' autocorrelation times were 190-314 steps
-    (6000-step cap reached); with 3 and 4, 42 % of each accepted, the thicknesses no longer the
+    (6000-step cap reached); with 3 and 4, 40 % and 42 % accepted, the thicknesses no longer the
     slowest coordinates (``python benchmarks/base_stage.py``).
 
     Mixing is then that of a few-parameter problem per block instead of one of
@@ -896,11 +908,11 @@ class BlockwiseMove:
             terms = np.where(ok[:, None], after_terms, terms)
             log_prob = np.where(ok, after, before)
             # 3. the layout's exact scale symmetry (no forward evaluation: the values do not change)
-            if getattr(lp, "scale_direction", None) is not None:
+            if lp.scale_direction is not None:
                 moved, log_prob, scaled = self._scale_moves(moved, log_prob, terms, random)
                 accepted[index] |= scaled
             # 4. shared coordinates drawn from their priors, the blocks held at their physical values
-            if getattr(lp, "prior_proposal_columns", None) is not None:
+            if lp.prior_proposal_columns is not None:
                 moved, terms, drawn = self._prior_proposals(moved, terms, random)
                 log_prob = lp.log_prior_shared(moved) + terms.sum(axis=1)
                 accepted[index] |= drawn

@@ -207,6 +207,7 @@ class _GaussianBlocks:
     n_wavelengths = 3
     blocks = np.array([[0, 3], [1, 4], [2, 5]])
     shared_slice = slice(6, 7)
+    scale_direction = prior_proposal_columns = None  # no exact symmetry, no draws from the prior
     coupling = np.array([[0.8, -0.5], [0.0, 1.2], [-0.6, 0.3]])  # b per block
     block_cov = np.array([[[1.0, 0.6], [0.6, 0.5]], [[0.3, -0.1], [-0.1, 0.2]], [[2.0, 0.0], [0.0, 1.0]]])
 
